@@ -1,8 +1,8 @@
 """Validated configuration models (pydantic) and YAML loading with located errors.
 
-Each component defines one model deriving from :class:`GatmoModel`; unknown keys are refused by name,
-wrong types and out-of-range values by key. :func:`load_model` turns a YAML file into a model and any
-problem into a :class:`~gatmo.errors.ConfigError` naming the file, the line and the key.
+Each component defines one model deriving from :class:`GatmoModel`; unknown keys are refused by
+name, wrong types and out-of-range values by key. :func:`load_model` turns a YAML file into a
+model and any problem into a :class:`~gatmo.errors.ConfigError` naming file, line and key.
 """
 
 from __future__ import annotations
@@ -64,7 +64,9 @@ def read_yaml(path: str | Path) -> tuple[Any, str]:
         mark = getattr(exc, "problem_mark", None)
         if mark is not None:
             line = mark.line + 1
-        raise FormatError(f"invalid YAML: {getattr(exc, 'problem', exc)}", file=path, line=line) from exc
+        raise FormatError(
+            f"invalid YAML: {getattr(exc, 'problem', exc)}", file=path, line=line
+        ) from exc
     return data, text
 
 

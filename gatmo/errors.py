@@ -1,7 +1,7 @@
 """The one exception family of gatmo.
 
-Every error the library raises on bad input is a :class:`GatmoError`. It carries where the problem is
-(file, line, field) so that the CLI can print a single line such as::
+Every error the library raises on bad input is a :class:`GatmoError`. It carries where the
+problem is (file, line, field) so that the CLI can print a single line such as::
 
     run_1.clf:12: FLASER: expected 180 readings, found 179
 """
@@ -54,7 +54,7 @@ class MapError(GatmoError):
 
 
 class DataError(GatmoError):
-    """Data is internally inconsistent (timestamps backwards, beam count changed, stamps don't match)."""
+    """Data is inconsistent (timestamps backwards, beam count changed, stamps don't match)."""
 
 
 class MissingExtraError(GatmoError):

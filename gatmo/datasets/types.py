@@ -23,7 +23,7 @@ class Scan:
         range_min_m, range_max_m: sensor limits [m].
         odom_pose_xytheta: (3,) pose of the robot base in the odometry frame at ``stamp_s``.
         laser_pose_xytheta: (3,) pose of the laser in the robot base frame.
-        gt_pose_xytheta: (3,) ground-truth (or reference) pose of the base in the map frame, if known.
+        gt_pose_xytheta: (3,) ground-truth (or reference) base pose in the map frame, if known.
     """
 
     stamp_s: float
@@ -73,7 +73,7 @@ class Scan:
 
 @dataclass
 class ReadStats:
-    """What a reader met: lines/messages read, scans yielded, bad records skipped (skip_bad=True)."""
+    """What a reader met: records read, scans yielded, bad records skipped (skip_bad=True)."""
 
     records: int = 0
     scans: int = 0

@@ -1,7 +1,7 @@
 """Occupancy grids in the ROS ``nav_msgs/OccupancyGrid`` convention.
 
-``cells[iy, ix]``: row ``iy`` grows with world y, column ``ix`` with world x; cell (0, 0) has its lower
-left corner at the origin. Values: ``FREE = 0``, ``OCCUPIED = 100``, ``UNKNOWN = -1`` (int8).
+``cells[iy, ix]``: row ``iy`` grows with world y, column ``ix`` with world x; cell (0, 0) has its
+lower left corner at the origin. Values: ``FREE = 0``, ``OCCUPIED = 100``, ``UNKNOWN = -1`` (int8).
 The origin's yaw must be 0: map_server writes it but AMCL ignores it, so a rotated origin would be
 silently misread; gatmo refuses it instead.
 """
@@ -45,7 +45,7 @@ class OccupancyGrid:
             raise MapError("origin must be finite", field="origin")
         if abs(oyaw) > 1e-9:
             raise MapError(
-                f"origin yaw {oyaw} rad is not supported (AMCL ignores it); rotate the image instead",
+                f"origin yaw {oyaw} rad is not supported (AMCL ignores it); rotate the image",
                 field="origin",
             )
         self.resolution_m = float(self.resolution_m)
@@ -87,7 +87,12 @@ class OccupancyGrid:
     def in_bounds(self, cells_ixy: np.ndarray) -> np.ndarray:
         """Boolean mask (N,) of cells inside the grid."""
         c = np.asarray(cells_ixy)
-        return (c[..., 0] >= 0) & (c[..., 0] < self.width) & (c[..., 1] >= 0) & (c[..., 1] < self.height)
+        return (
+            (c[..., 0] >= 0)
+            & (c[..., 0] < self.width)
+            & (c[..., 1] >= 0)
+            & (c[..., 1] < self.height)
+        )
 
     def value_at(self, points_xy: np.ndarray) -> np.ndarray:
         """Cell values (N,) at world points; UNKNOWN outside the grid."""

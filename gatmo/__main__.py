@@ -1,0 +1,5 @@
+import sys
+
+from gatmo.cli import main
+
+sys.exit(main())

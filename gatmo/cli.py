@@ -1,0 +1,255 @@
+"""The ``gatmo`` command line. Each command maps its arguments onto one library call.
+
+Imports of numpy, numba and the algorithm packages happen inside the commands, so
+``gatmo --help`` stays instant. Library errors (:class:`gatmo.errors.GatmoError`) become one red
+line and exit code 1; ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from gatmo import __version__
+
+app = typer.Typer(
+    name="gatmo",
+    help="Localization plus an object map that keeps up with moved furniture.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+map_app = typer.Typer(help="Build occupancy maps.", no_args_is_help=True)
+config_app = typer.Typer(help="Show or write configuration files.", no_args_is_help=True)
+app.add_typer(map_app, name="map")
+app.add_typer(config_app, name="config")
+
+
+def _console(stderr: bool = False):
+    from rich.console import Console
+
+    return Console(stderr=stderr, highlight=False)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        print(f"gatmo {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_version_callback, is_eager=True, help="Print version."),
+    ] = False,
+    debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks on errors.")] = False,
+) -> None:
+    """gatmo: Monte Carlo localization and GATMO object maps."""
+
+
+def _parse_pose(text: str | None, name: str = "--initial-pose"):
+    if text is None:
+        return None
+    from gatmo.errors import ConfigError
+
+    parts = text.replace(" ", "").split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise ConfigError(f"expected X,Y,YAW numbers, got {text!r}", field=name) from None
+    if len(values) != 3:
+        raise ConfigError(f"expected 3 values X,Y,YAW, got {len(values)}", field=name)
+    return values
+
+
+def _progress(description: str):
+    """A rich progress bar usable as ``progress(i, n)``; returns (context manager, callback)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    bar = Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=_console(stderr=True),
+        transient=False,
+    )
+    task = bar.add_task(description, total=None)
+
+    def update(i: int, n: int | None) -> None:
+        bar.update(task, completed=i, total=n)
+
+    return bar, update
+
+
+def _print_mapping(title: str, rows: dict) -> None:
+    from rich.table import Table
+
+    table = Table(title=title, show_header=False)
+    table.add_column("field", style="bold")
+    table.add_column("value")
+    for k, v in rows.items():
+        if isinstance(v, float):
+            v = f"{v:.4g}"
+        elif isinstance(v, dict | list):
+            import json
+
+            v = json.dumps(v, default=str)
+        table.add_row(str(k), str(v))
+    _console().print(table)
+
+
+# --------------------------------------------------------------------------- info
+@app.command()
+def info(
+    file: Annotated[
+        Path, typer.Argument(help="Log, bag, map YAML, wean.dat, TUM or relations.")
+    ],
+    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+) -> None:
+    """Summarise a data file: sensor, beams, FOV, range, scans, duration, path, topics."""
+    from gatmo.datasets.info import summarize
+
+    summary = summarize(file, fmt=fmt)
+    topics = summary.pop("topics", None)
+    _print_mapping(str(file), summary)
+    if topics:
+        from rich.table import Table
+
+        table = Table(title="topics")
+        for col in ("topic", "type", "messages"):
+            table.add_column(col)
+        for t in topics:
+            table.add_row(str(t["topic"]), str(t["type"]), str(t["count"]))
+        _console().print(table)
+
+
+# ----------------------------------------------------------------------- simulate
+@app.command()
+def simulate(
+    out: Annotated[Path, typer.Argument(help="Output folder.")],
+    preset: Annotated[str, typer.Option(help="World preset: hall | office.")] = "hall",
+    runs: Annotated[
+        int, typer.Option(min=1, help="Runs (furniture rearranged between).")
+    ] = 4,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 3,
+    bag: Annotated[bool, typer.Option("--bag", help="Also write a ROS 2 bag per run.")] = False,
+) -> None:
+    """Simulate a rearranged-room scenario: map, logs, ground truth and scenario.json."""
+    from gatmo.datasets.sim import simulate_scenario
+
+    result = simulate_scenario(out, preset=preset, runs=runs, seed=seed, bag=bag)
+    _print_mapping(f"scenario {preset} seed {seed} -> {out}", result.summary())
+
+
+# ----------------------------------------------------------------------- localize
+@app.command()
+def localize(
+    map_yaml: Annotated[Path, typer.Option("--map", help="map_server map YAML.")],
+    log: Annotated[Path, typer.Option("--log", help="Log or bag with scans and odometry.")],
+    out: Annotated[Path, typer.Option("--out", help="Output TUM trajectory.")],
+    params: Annotated[Path | None, typer.Option("--params", help="AMCL parameter YAML.")] = None,
+    initial_pose: Annotated[
+        str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")
+    ] = None,
+    global_loc: Annotated[bool, typer.Option("--global", help="Global localization.")] = False,
+    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
+) -> None:
+    """Monte Carlo localization of a log in a static map; writes the pose at every scan (TUM)."""
+    from gatmo.pipeline.localize import run_localize
+
+    bar, update = _progress("localize")
+    with bar:
+        summary = run_localize(
+            map_yaml,
+            log,
+            params_path=params,
+            fmt=fmt,
+            initial_pose=_parse_pose(initial_pose),
+            global_localization=global_loc,
+            out_path=out,
+            max_scans=max_scans,
+            progress=update,
+        )
+    _print_mapping("localization", summary.as_dict())
+
+
+# ------------------------------------------------------------------------- config
+@config_app.command("dump")
+def config_dump(
+    component: Annotated[str, typer.Argument(help="amcl | gatmo | sim | icp")] = "amcl",
+    params: Annotated[
+        Path | None, typer.Option("--params", help="Load this file first (e.g. ROS AMCL YAML).")
+    ] = None,
+) -> None:
+    """Print a component's full configuration as YAML (defaults, or as loaded from --params)."""
+    from gatmo.config import dump_model
+    from gatmo.errors import ConfigError
+
+    if component == "amcl":
+        from gatmo.localization.config import AmclConfig
+        from gatmo.localization.params import load_amcl_yaml
+
+        cfg = load_amcl_yaml(params) if params else AmclConfig()
+    elif component == "gatmo":
+        from gatmo.config import load_model
+        from gatmo.objects.config import GatmoConfig
+
+        cfg = load_model(GatmoConfig, params) if params else GatmoConfig()
+    elif component == "sim":
+        from gatmo.config import load_model
+        from gatmo.datasets.sim import SimConfig
+
+        cfg = load_model(SimConfig, params) if params else SimConfig()
+    else:
+        raise ConfigError(f"unknown component {component!r}: amcl | gatmo | sim", field="component")
+    sys.stdout.write(dump_model(cfg))
+
+
+# ---------------------------------------------------------------------- map build
+@map_app.command("build")
+def map_build(
+    log: Annotated[Path, typer.Argument(help="Log or bag with scans and odometry.")],
+    out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it).")],
+    poses_out: Annotated[
+        Path | None, typer.Option("--poses-out", help="Optimized poses (TUM).")
+    ] = None,
+    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+) -> None:
+    """Build a map from raw odometry and scans: ICP odometry, loop closures, gtsam pose graph."""
+    from gatmo.pipeline.mapbuild import run_map_build
+
+    bar, update = _progress("map build")
+    with bar:
+        summary = run_map_build(log, out, poses_out=poses_out, fmt=fmt, progress=update)
+    _print_mapping("map build", summary.as_dict())
+
+
+# ---------------------------------------------------------------------- entry point
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point: run the app, turning GatmoError into one red line and exit code 1."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    try:
+        app(args=argv, prog_name="gatmo")  # standalone: usage errors print and exit 2
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except Exception as exc:
+        from gatmo.errors import GatmoError
+
+        if debug or not isinstance(exc, GatmoError):
+            raise
+        from rich.markup import escape
+
+        _console(stderr=True).print(f"[bold red]error:[/bold red] [red]{escape(str(exc))}[/red]")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

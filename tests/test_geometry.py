@@ -1,0 +1,63 @@
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gatmo.geometry import (
+    compose,
+    interpolate_poses,
+    inverse,
+    path_length_m,
+    relative,
+    transform_points,
+    wrap_angle,
+)
+
+pose = st.tuples(
+    st.floats(-50, 50), st.floats(-50, 50), st.floats(-np.pi, np.pi)
+).map(np.array)
+
+
+def test_compose_known_answer():
+    a = np.array([1.0, 2.0, np.pi / 2])
+    b = np.array([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(compose(a, b), [1.0, 3.0, np.pi / 2 - 2 * np.pi * 0], atol=1e-12)
+
+
+@given(pose, pose)
+@settings(max_examples=100)
+def test_relative_inverts_compose(a, b):
+    c = compose(a, b)
+    r = relative(a, c)
+    np.testing.assert_allclose(r[:2], b[:2], atol=1e-9)
+    assert abs(wrap_angle(r[2] - b[2])) < 1e-9
+
+
+@given(pose)
+def test_inverse_is_identity(a):
+    e = compose(a, inverse(a))
+    np.testing.assert_allclose(e[:2], 0.0, atol=1e-9)
+    assert abs(wrap_angle(e[2])) < 1e-9
+
+
+def test_transform_points_matches_compose():
+    T = np.array([2.0, -1.0, 0.3])
+    pts = np.array([[1.0, 0.0], [0.0, 2.0]])
+    out = transform_points(T, pts)
+    for p, o in zip(pts, out, strict=True):
+        np.testing.assert_allclose(compose(T, np.array([*p, 0.0]))[:2], o)
+
+
+def test_interpolate_short_arc_and_clamp():
+    stamps = np.array([0.0, 1.0])
+    poses = np.array([[0.0, 0.0, np.pi - 0.1], [2.0, 0.0, -np.pi + 0.1]])
+    mid = interpolate_poses(stamps, poses, np.array([0.5, -1.0, 3.0]))
+    np.testing.assert_allclose(mid[0, :2], [1.0, 0.0])
+    assert abs(abs(mid[0, 2]) - np.pi) < 1e-9  # through pi, not through 0
+    np.testing.assert_allclose(mid[1], poses[0])
+    np.testing.assert_allclose(mid[2, :2], poses[1, :2])
+
+
+def test_path_length():
+    p = np.array([[0, 0, 0], [3, 4, 0], [3, 5, 1.0]])
+    assert path_length_m(p) == 6.0
+    assert path_length_m(p[:1]) == 0.0
