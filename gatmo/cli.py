@@ -179,10 +179,132 @@ def localize(
     _print_mapping("localization", summary.as_dict())
 
 
+# ---------------------------------------------------------------------------- run
+@app.command()
+def run(
+    map_yaml: Annotated[Path, typer.Option("--map", help="map_server map YAML (the static map).")],
+    log: Annotated[Path, typer.Option("--log", help="Log or bag with scans and odometry.")],
+    out: Annotated[Path, typer.Option("--out", help="Output folder.")],
+    objects: Annotated[
+        Path | None, typer.Option("--objects", help="objects.json from an earlier run.")
+    ] = None,
+    params: Annotated[Path | None, typer.Option("--params", help="AMCL parameter YAML.")] = None,
+    config: Annotated[
+        Path | None, typer.Option("--config", help="gatmo stack YAML (gatmo config dump stack).")
+    ] = None,
+    initial_pose: Annotated[
+        str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")
+    ] = None,
+    global_loc: Annotated[bool, typer.Option("--global", help="Global localization.")] = False,
+    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
+) -> None:
+    """Full stack (localizer + scan matcher + GATMO) on one log: poses, objects, map, events."""
+    from gatmo.pipeline.runs import run_gatmo
+
+    bar, update = _progress("gatmo run")
+    with bar:
+        summary = run_gatmo(
+            map_yaml, log, out, objects_path=objects, params_path=params, config_path=config,
+            initial_pose=_parse_pose(initial_pose), global_localization=global_loc, fmt=fmt,
+            max_scans=max_scans, progress=update,
+        )
+    for row in summary.rows:
+        _print_mapping(f"gatmo run -> {out}", row)
+
+
+def _print_compare(result) -> None:
+    from rich.table import Table
+
+    cols = [
+        ("run", "run", "{}"), ("log", "log", "{}"), ("side", "side", "{}"),
+        ("ate_rmse_m", "ATE rmse m", "{:.3f}"), ("ate_median_m", "median m", "{:.3f}"),
+        ("ate_max_m", "max m", "{:.2f}"), ("lost_fraction", "lost", "{:.1%}"),
+        ("rel_trans_mean_m", "rel m", "{:.3f}"), ("rel_rot_mean_deg", "rel deg", "{:.2f}"),
+        ("absent", "absent", "{}"), ("relocated", "relocated", "{}"), ("added", "added", "{}"),
+        ("ms_per_scan", "ms/scan", "{:.1f}"),
+    ]
+    present = [c for c in cols if any(c[0] in r for r in result.rows)]
+    table = Table(title="static localizer vs gatmo (localizer + scan matcher + object map)")
+    for _, head, _ in present:
+        table.add_column(head, justify="right")
+    for r in result.rows:
+        table.add_row(*[fmt.format(r[k]) if r.get(k) is not None else "-" for k, _, fmt in present])
+    for side, o in result.overall.items():
+        row = []
+        for k, _, fmt in present:
+            if k == "side":
+                row.append(f"[bold]{side}[/bold]")
+            elif k == "log":
+                row.append("[bold]all[/bold]")
+            elif k in o:
+                row.append(fmt.format(o[k]))
+            else:
+                row.append("")
+        table.add_row(*row)
+    console = _console()
+    console.print(table)
+    console.print(f"summary: {result.out_dir / 'summary.json'}")
+    for p in result.pictures:
+        console.print(f"picture: {p}")
+
+
+@app.command()
+def compare(
+    logs: Annotated[list[Path], typer.Argument(help="Logs in the order they were recorded.")],
+    map_yaml: Annotated[Path, typer.Option("--map", help="map_server map YAML (the static map).")],
+    out: Annotated[Path, typer.Option("--out", help="Output folder.")],
+    params: Annotated[Path | None, typer.Option("--params", help="AMCL parameter YAML.")] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="gatmo stack YAML.")] = None,
+    initial_pose: Annotated[
+        str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")
+    ] = None,
+    global_loc: Annotated[bool, typer.Option("--global", help="Global localization.")] = False,
+    ground_truth: Annotated[
+        list[Path] | None, typer.Option("--ground-truth", help="TUM ground truth, one per log.")
+    ] = None,
+    relations: Annotated[
+        Path | None, typer.Option("--relations", help="Kuemmerle relations file.")
+    ] = None,
+    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    max_scans: Annotated[int | None, typer.Option(help="At most this many scans per log.")] = None,
+    scenario: Annotated[
+        Path | None, typer.Option("--scenario", help="scenario.json of a simulated scenario.")
+    ] = None,
+) -> None:
+    """Static localizer vs full stack on the same logs, object map carried from log to log."""
+    from gatmo.pipeline.runs import compare as run_compare
+
+    bar, update = _progress("compare")
+    with bar:
+        result = run_compare(
+            map_yaml, logs, out, params_path=params, config_path=config,
+            initial_pose=_parse_pose(initial_pose), global_localization=global_loc,
+            gt_paths=ground_truth, relations_path=relations, fmt=fmt, max_scans=max_scans,
+            scenario_json=scenario, progress=update,
+        )
+    _print_compare(result)
+
+
+@app.command()
+def demo(
+    out: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("demo-out"),
+    seed: Annotated[int, typer.Option(help="Scenario seed.")] = 3,
+    runs: Annotated[int, typer.Option(min=1, help="Runs in the scenario.")] = 4,
+) -> None:
+    """Simulate the default hall scenario and compare static vs gatmo on it."""
+    from gatmo.pipeline.runs import demo as run_demo
+
+    bar, update = _progress("demo")
+    with bar:
+        result = run_demo(out, seed=seed, runs=runs, progress=update)
+    _print_compare(result)
+
+
 # ------------------------------------------------------------------------- config
 @config_app.command("dump")
 def config_dump(
-    component: Annotated[str, typer.Argument(help="amcl | gatmo | sim | icp")] = "amcl",
+    component: Annotated[str, typer.Argument(help="amcl | gatmo | sim | stack")] = "amcl",
     params: Annotated[
         Path | None, typer.Option("--params", help="Load this file first (e.g. ROS AMCL YAML).")
     ] = None,
@@ -206,8 +328,14 @@ def config_dump(
         from gatmo.datasets.sim import SimConfig
 
         cfg = load_model(SimConfig, params) if params else SimConfig()
+    elif component == "stack":
+        from gatmo.pipeline.config import load_stack_config
+
+        cfg = load_stack_config(params)
     else:
-        raise ConfigError(f"unknown component {component!r}: amcl | gatmo | sim", field="component")
+        raise ConfigError(
+            f"unknown component {component!r}: amcl | gatmo | sim | stack", field="component"
+        )
     sys.stdout.write(dump_model(cfg))
 
 

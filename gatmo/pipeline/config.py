@@ -1,0 +1,61 @@
+"""The full stack's configuration: one validated model per component, saved with every run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field
+
+from gatmo.config import GatmoModel, dump_model, load_model
+from gatmo.pipeline.stack import FusionConfig
+
+
+def _stack_config_class():
+    from gatmo.localization.config import AmclConfig
+    from gatmo.objects.config import GatmoConfig
+    from gatmo.scanmatch.odometry import IcpConfig
+
+    class StackConfig(GatmoModel):
+        """amcl: localizer; gatmo: object map; icp: scan matcher; fusion: offset resets."""
+
+        amcl: AmclConfig = Field(default_factory=AmclConfig)
+        gatmo: GatmoConfig = Field(default_factory=GatmoConfig)
+        icp: IcpConfig = Field(default_factory=IcpConfig)
+        fusion: FusionConfig = Field(default_factory=FusionConfig)
+        seed: int = 0
+
+    return StackConfig
+
+
+_CLASS = None
+
+
+def stack_config_class():
+    """The StackConfig model (built lazily so that importing the pipeline stays cheap)."""
+    global _CLASS
+    if _CLASS is None:
+        _CLASS = _stack_config_class()
+    return _CLASS
+
+
+def load_stack_config(config_path: str | Path | None = None, params_path: str | Path | None = None):
+    """Load the stack config.
+
+    ``config_path``: a gatmo stack YAML (sections amcl, gatmo, icp, fusion, seed), as written by
+    ``gatmo config dump stack``. ``params_path``: a ROS 1 / Nav2 AMCL YAML that replaces the
+    ``amcl`` section, so an AMCL user's file drops in unchanged.
+    """
+    cls = stack_config_class()
+    cfg = load_model(cls, config_path) if config_path is not None else cls()
+    if params_path is not None:
+        from gatmo.localization.params import load_amcl_yaml
+
+        cfg.amcl = load_amcl_yaml(params_path)
+    return cfg
+
+
+def dump_stack_config(cfg) -> str:
+    return dump_model(cfg)
+
+
+__all__ = ["dump_stack_config", "load_stack_config", "stack_config_class"]

@@ -1,0 +1,543 @@
+"""Runs over logs with files in and out: ``gatmo run`` and ``gatmo compare``.
+
+``compare`` runs the same logs twice in one go with the same seeds and parameters:
+
+* ``static``: the Monte Carlo localizer alone on the static map, as an AMCL user has it today;
+* ``gatmo``: localizer + scan matcher + GATMO, the object map carried from log to log and fed
+  back into the localizer's likelihood field.
+
+Per log, results are written as soon as the log is done (atomically), so an error in a later
+log (unreadable file, ground truth that does not match) keeps what was already compared.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gatmo._io import atomic_write_text
+from gatmo.errors import DataError, GatmoError
+from gatmo.maps.grid import OCCUPIED, UNKNOWN, OccupancyGrid
+from gatmo.pipeline.stack import LocalizationStack
+
+Progress = Callable[[int, int | None], None]
+
+SIDES = ("static", "gatmo")
+
+
+# ----------------------------------------------------------------------------- traces
+@dataclass
+class RunTrace:
+    """Everything one side produced on one log (in memory)."""
+
+    log: str
+    side: str
+    stamps_s: np.ndarray
+    poses_xytheta: np.ndarray
+    localizer_poses_xytheta: np.ndarray
+    confident: np.ndarray
+    ms: np.ndarray
+    events: list = field(default_factory=list)
+    resets: int = 0
+    map_updates: int = 0
+
+    def mean_ms(self) -> float:
+        return float(np.mean(self.ms)) if len(self.ms) else float("nan")
+
+
+@dataclass
+class GroundTruth:
+    stamps_s: np.ndarray
+    poses_xytheta: np.ndarray
+    source: str
+
+
+def load_scans(log: str | Path, fmt: str | None = None, max_scans: int | None = None) -> list:
+    """Read a whole log into memory (both sides of a comparison use the same scans)."""
+    from gatmo.datasets.open import open_log
+
+    src = open_log(log, fmt=fmt)
+    scans = []
+    for scan in src:
+        scans.append(scan)
+        if max_scans is not None and len(scans) >= max_scans:
+            break
+    if not scans:
+        raise DataError("no scans in the log", file=log)
+    return scans
+
+
+def ground_truth_of(scans: list, log: str | Path, gt_path: str | Path | None) -> GroundTruth | None:
+    """Ground truth from a TUM file, else from the scans' own gt poses, else None.
+
+    A TUM file whose stamps do not cover the log is refused: scoring against it would be
+    meaningless.
+    """
+    stamps = np.array([s.stamp_s for s in scans])
+    if gt_path is not None:
+        from gatmo.datasets.tum import read_tum
+
+        gt_s, gt_p = read_tum(gt_path)
+        if len(gt_s) == 0:
+            raise DataError("ground truth is empty", file=gt_path)
+        covered = np.mean((stamps >= gt_s[0] - 0.05) & (stamps <= gt_s[-1] + 0.05))
+        if covered < 0.5:
+            raise DataError(
+                f"ground-truth stamps [{gt_s[0]:.3f}, {gt_s[-1]:.3f}] s cover {covered:.0%} of "
+                f"the log's scans [{stamps[0]:.3f}, {stamps[-1]:.3f}] s ({Path(log).name})",
+                file=gt_path,
+            )
+        return GroundTruth(np.asarray(gt_s), np.asarray(gt_p), str(gt_path))
+    have = [s.gt_pose_xytheta is not None for s in scans]
+    if sum(have) >= max(2, len(scans) // 2):
+        idx = [i for i, h in enumerate(have) if h]
+        return GroundTruth(
+            stamps[idx], np.array([scans[i].gt_pose_xytheta for i in idx]), f"{log} (in-log)"
+        )
+    return None
+
+
+def check_overlap(grid: OccupancyGrid, scan, pose_xytheta: np.ndarray, log: str | Path) -> float:
+    """Fraction of the first scan's endpoints that land on the map's known area near a wall.
+
+    A log recorded elsewhere puts its returns in unknown space or outside the grid; refuse it
+    instead of reporting a meaningless error figure.
+    """
+    from gatmo.geometry import compose, transform_points
+
+    pts = transform_points(compose(pose_xytheta, scan.laser_pose_xytheta), scan.points_laser_xy())
+    if len(pts) == 0:
+        return 1.0
+    vals = grid.value_at(pts)
+    known = np.mean(vals != UNKNOWN)
+    if known < 0.1:
+        raise DataError(
+            f"the log does not overlap the map: {known:.0%} of the first scan's returns at the "
+            f"initial pose fall on known map cells",
+            file=log,
+        )
+    return float(known)
+
+
+# ---------------------------------------------------------------------------- builders
+def initial_pose_for(scans: list, initial_pose, global_localization: bool):
+    """The initial pose: the given one, else the log's first ground-truth pose, else None."""
+    if initial_pose is not None:
+        return np.asarray(initial_pose, dtype=float)
+    if global_localization:
+        return None
+    first = scans[0].gt_pose_xytheta
+    return None if first is None else np.asarray(first, dtype=float)
+
+
+def make_localizer(cfg, grid: OccupancyGrid, seed: int, initial_pose, global_localization: bool):
+    from gatmo.localization.mcl import MonteCarloLocalizer
+
+    loc = MonteCarloLocalizer.from_config(cfg.amcl, grid, rng=np.random.default_rng(seed))
+    if initial_pose is not None:
+        loc.set_initial_pose(np.asarray(initial_pose, dtype=float), initial_cov(cfg.amcl))
+    else:
+        loc.global_localization()
+    return loc
+
+
+def initial_cov(amcl_cfg) -> np.ndarray:
+    """The initial covariance from the AMCL config (AMCL's initial_cov_xx/yy/aa)."""
+    xx = getattr(amcl_cfg, "initial_cov_xx_m2", 0.25)
+    yy = getattr(amcl_cfg, "initial_cov_yy_m2", 0.25)
+    aa = getattr(amcl_cfg, "initial_cov_aa_rad2", (np.pi / 12) ** 2)
+    return np.diag([xx, yy, aa])
+
+
+def make_matcher(cfg):
+    from gatmo.scanmatch.odometry import ScanMatchOdometry
+
+    return ScanMatchOdometry.from_config(cfg.icp)
+
+
+def run_side(
+    stack: LocalizationStack,
+    scans: list,
+    *,
+    log: str,
+    side: str,
+    run_id: int,
+    progress: Progress | None = None,
+    offset: int = 0,
+    total: int | None = None,
+) -> RunTrace:
+    """Step a stack through one log's scans."""
+    stack.begin_run(run_id)
+    n = len(scans)
+    stamps = np.empty(n)
+    poses = np.empty((n, 3))
+    loc_poses = np.empty((n, 3))
+    confident = np.zeros(n, dtype=bool)
+    ms = np.empty(n)
+    events: list = []
+    resets = 0
+    for i, scan in enumerate(scans):
+        step = stack.step(scan)
+        stamps[i] = step.stamp_s
+        poses[i] = step.pose_xytheta
+        loc_poses[i] = step.localizer_pose_xytheta
+        confident[i] = step.confident
+        ms[i] = step.ms
+        resets += int(step.reset)
+        for ev in step.events:
+            events.append(_event_dict(ev, scan_index=i))
+        if progress is not None and (i % 20 == 0 or i == n - 1):
+            progress(offset + i + 1, total)
+    t0 = time.perf_counter()
+    for ev in stack.end_run():
+        events.append(_event_dict(ev, scan_index=n))
+    if n:
+        ms[-1] += (time.perf_counter() - t0) * 1e3
+    return RunTrace(
+        log=log,
+        side=side,
+        stamps_s=stamps,
+        poses_xytheta=poses,
+        localizer_poses_xytheta=loc_poses,
+        confident=confident,
+        ms=ms,
+        events=events,
+        resets=resets,
+        map_updates=stack.n_map_updates,
+    )
+
+
+def _event_dict(ev, scan_index: int) -> dict:
+    d = ev.as_dict() if hasattr(ev, "as_dict") else dict(ev)
+    d["scan_index"] = int(scan_index)
+    return json.loads(json.dumps(d, default=_json_default))
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    return str(o)
+
+
+# ----------------------------------------------------------------------------- metrics
+def score(trace: RunTrace, gt: GroundTruth | None, relations=None) -> dict:
+    """ATE (no alignment: the map frame is fixed), lost fraction, relations error, timing."""
+    row: dict = {
+        "log": Path(trace.log).name,
+        "side": trace.side,
+        "scans": int(len(trace.stamps_s)),
+        "ms_per_scan": float(np.mean(trace.ms)) if len(trace.ms) else float("nan"),
+        "ms_per_scan_median": float(np.median(trace.ms)) if len(trace.ms) else float("nan"),
+    }
+    if gt is not None:
+        from gatmo.datasets.metrics import ate
+
+        a = ate(trace.stamps_s, trace.poses_xytheta, gt.stamps_s, gt.poses_xytheta)
+        row.update(
+            ate_rmse_m=a["rmse_m"],
+            ate_median_m=a["median_m"],
+            ate_max_m=a["max_m"],
+            lost_fraction=a["lost_fraction"],
+        )
+    if relations is not None:
+        from gatmo.datasets.metrics import relations_error
+
+        r = relations_error(trace.stamps_s, trace.poses_xytheta, relations)
+        row.update(
+            rel_trans_mean_m=r["trans_mean_m"],
+            rel_rot_mean_deg=r["rot_mean_deg"],
+            rel_used=r["n_used"],
+        )
+    kinds = [e.get("kind") for e in trace.events]
+    row.update(
+        absent=kinds.count("absent"),
+        relocated=kinds.count("relocated"),
+        added=kinds.count("added"),
+        movable=kinds.count("movable"),
+        resets=trace.resets,
+    )
+    return row
+
+
+def error_series(trace: RunTrace, gt: GroundTruth) -> np.ndarray:
+    """Position error (N,) [m] of a trace against ground truth interpolated at its stamps."""
+    from gatmo.geometry import interpolate_poses
+
+    g = interpolate_poses(gt.stamps_s, gt.poses_xytheta, trace.stamps_s)
+    e = np.hypot(*(trace.poses_xytheta[:, :2] - g[:, :2]).T)
+    outside = (trace.stamps_s < gt.stamps_s[0] - 0.05) | (trace.stamps_s > gt.stamps_s[-1] + 0.05)
+    e[outside] = np.nan
+    return e
+
+
+# ------------------------------------------------------------------------------ writers
+def write_trace(trace: RunTrace, out_dir: Path) -> None:
+    from gatmo.datasets.tum import write_tum
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_tum(out_dir / "poses.tum", trace.stamps_s, trace.poses_xytheta)
+    if trace.side == "gatmo":
+        text = "".join(json.dumps(e, default=_json_default) + "\n" for e in trace.events)
+        atomic_write_text(out_dir / "events.jsonl", text)
+
+
+def write_object_map(mapper, base_grid: OccupancyGrid, out_dir: Path, base_meta: dict) -> None:
+    """objects.json and the reconfigured map, each written atomically."""
+    from gatmo.maps.io import save_map
+    from gatmo.maps.object_io import save_objects
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    save_map(mapper.grid(), out_dir / "map.yaml")
+    save_objects(out_dir / "objects.json", mapper.object_map, base_grid_meta=base_meta)
+
+
+def _base_meta(map_yaml: Path, grid: OccupancyGrid) -> dict:
+    return {
+        "map_yaml": str(map_yaml),
+        "resolution_m": grid.resolution_m,
+        "origin_xytheta": list(grid.origin_xytheta),
+        "shape": [grid.height, grid.width],
+    }
+
+
+def _make_mapper(cfg, grid: OccupancyGrid, objects_path: Path | None):
+    from gatmo.objects.mapper import GatmoMapper
+
+    object_map = None
+    if objects_path is not None:
+        from gatmo.maps.object_io import load_objects
+
+        object_map = load_objects(objects_path)
+    return GatmoMapper.from_config(cfg.gatmo, grid, object_map=object_map)
+
+
+# ----------------------------------------------------------------------------- gatmo run
+@dataclass
+class RunSummary:
+    rows: list
+    out_dir: Path
+
+    def as_dict(self) -> dict:
+        return {"out_dir": str(self.out_dir), "logs": self.rows}
+
+
+def run_gatmo(
+    map_yaml: str | Path,
+    log: str | Path,
+    out_dir: str | Path,
+    *,
+    objects_path: str | Path | None = None,
+    params_path: str | Path | None = None,
+    config_path: str | Path | None = None,
+    initial_pose=None,
+    global_localization: bool = False,
+    fmt: str | None = None,
+    run_id: int = 1,
+    max_scans: int | None = None,
+    progress: Progress | None = None,
+) -> RunSummary:
+    """``gatmo run``: the full stack on one log; writes poses.tum, objects.json, map, events."""
+    from gatmo.maps.io import load_map
+
+    from gatmo.pipeline.config import dump_stack_config, load_stack_config
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = load_stack_config(config_path, params_path)
+    atomic_write_text(out / "config.yaml", dump_stack_config(cfg))
+    base = load_map(map_yaml)
+    mapper = _make_mapper(cfg, base, Path(objects_path) if objects_path else None)
+    scans = load_scans(log, fmt, max_scans)
+    pose0 = initial_pose_for(scans, initial_pose, global_localization)
+    if pose0 is not None:
+        check_overlap(base, scans[0], pose0, log)
+    stack = LocalizationStack(
+        make_localizer(cfg, mapper.grid(), cfg.seed, pose0, pose0 is None),
+        make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
+        mapper,
+        cfg.fusion,
+    )
+    trace = run_side(
+        stack, scans, log=str(log), side="gatmo", run_id=run_id, progress=progress,
+        total=len(scans),
+    )
+    write_trace(trace, out)
+    write_object_map(mapper, base, out, _base_meta(Path(map_yaml), base))
+    gt = ground_truth_of(scans, log, None)
+    return RunSummary([score(trace, gt)], out)
+
+
+# ------------------------------------------------------------------------------ compare
+@dataclass
+class CompareResult:
+    out_dir: Path
+    rows: list  # one dict per (log, side)
+    overall: dict  # side -> dict
+    pictures: list
+    traces: dict = field(default_factory=dict)  # (log index, side) -> RunTrace
+
+    def as_dict(self) -> dict:
+        return {"out_dir": str(self.out_dir), "logs": self.rows, "overall": self.overall,
+                "pictures": [str(p) for p in self.pictures]}
+
+
+def _overall(rows: list) -> dict:
+    out = {}
+    for side in SIDES:
+        rs = [r for r in rows if r["side"] == side]
+        if not rs:
+            continue
+        scans = np.array([r["scans"] for r in rs], dtype=float)
+        o = {"logs": len(rs), "scans": int(scans.sum())}
+        for key in ("ate_rmse_m", "lost_fraction", "ms_per_scan"):
+            vals = [r.get(key) for r in rs]
+            if all(v is not None for v in vals):
+                v = np.array(vals, dtype=float)
+                if key == "ate_rmse_m":  # pooled RMSE over all scans
+                    o[key] = float(np.sqrt(np.sum(scans * v**2) / scans.sum()))
+                else:
+                    o[key] = float(np.sum(scans * v) / scans.sum())
+        for key in ("ate_max_m",):
+            vals = [r.get(key) for r in rs if r.get(key) is not None]
+            if vals:
+                o[key] = float(max(vals))
+        for key in ("absent", "relocated", "added"):
+            o[key] = int(sum(r.get(key, 0) for r in rs))
+        out[side] = o
+    return out
+
+
+def compare(
+    map_yaml: str | Path,
+    logs: Sequence[str | Path],
+    out_dir: str | Path,
+    *,
+    params_path: str | Path | None = None,
+    config_path: str | Path | None = None,
+    initial_pose=None,
+    global_localization: bool = False,
+    gt_paths: Sequence[str | Path] | None = None,
+    relations_path: str | Path | None = None,
+    fmt: str | None = None,
+    max_scans: int | None = None,
+    pictures: bool = True,
+    scenario_json: str | Path | None = None,
+    progress: Progress | None = None,
+    keep_traces: bool = False,
+) -> CompareResult:
+    """``gatmo compare``: static localizer vs full stack on the same logs, same seeds."""
+    from gatmo.maps.io import load_map
+
+    from gatmo.pipeline.config import dump_stack_config, load_stack_config
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if gt_paths and len(gt_paths) != len(logs):
+        raise GatmoError(
+            f"{len(gt_paths)} ground-truth files for {len(logs)} logs", field="--ground-truth"
+        )
+    cfg = load_stack_config(config_path, params_path)
+    atomic_write_text(out / "config.yaml", dump_stack_config(cfg))
+    base = load_map(map_yaml)
+    meta = _base_meta(Path(map_yaml), base)
+    relations = None
+    if relations_path is not None:
+        from gatmo.datasets.relations import read_relations
+
+        relations = read_relations(relations_path)
+
+    mapper = _make_mapper(cfg, base, None)
+    rows: list = []
+    pics: list = []
+    traces: dict = {}
+    done = 0
+    for k, log in enumerate(logs):
+        scans = load_scans(log, fmt, max_scans)
+        gt = ground_truth_of(scans, log, gt_paths[k] if gt_paths else None)
+        pose0 = initial_pose_for(scans, initial_pose, global_localization)
+        if pose0 is not None:
+            check_overlap(base, scans[0], pose0, log)
+        seed = cfg.seed + k
+        name = f"{k + 1:02d}_{Path(log).stem.split('.')[0]}"
+        total = 2 * len(scans)
+        grid_before = mapper.grid()
+
+        static = LocalizationStack(make_localizer(cfg, base, seed, pose0, pose0 is None))
+        t_static = run_side(static, scans, log=str(log), side="static", run_id=k + 1,
+                            progress=_offset(progress, done), total=None)
+        gat = LocalizationStack(
+            make_localizer(cfg, grid_before, seed, pose0, pose0 is None),
+            make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
+            mapper,
+            cfg.fusion,
+        )
+        t_gatmo = run_side(gat, scans, log=str(log), side="gatmo", run_id=k + 1,
+                           progress=_offset(progress, done + len(scans)), total=None)
+        done += total
+        write_trace(t_static, out / "static" / name)
+        write_trace(t_gatmo, out / "gatmo" / name)
+        write_object_map(mapper, base, out / "gatmo" / name, meta)
+        for t in (t_static, t_gatmo):
+            row = score(t, gt, relations)
+            row["run"] = k + 1
+            rows.append(row)
+        if pictures:
+            from gatmo.pipeline.plots import plot_log
+
+            pics.extend(
+                plot_log(out / "pictures" / name, base, grid_before, mapper, t_static, t_gatmo,
+                         gt, scenario_json=scenario_json, run=k + 1)
+            )
+        if keep_traces:
+            traces[(k, "static")] = t_static
+            traces[(k, "gatmo")] = t_gatmo
+        result = CompareResult(out, rows, _overall(rows), pics, traces)
+        atomic_write_text(
+            out / "summary.json", json.dumps(result.as_dict(), indent=2, default=_json_default)
+        )
+    return CompareResult(out, rows, _overall(rows), pics, traces)
+
+
+def _offset(progress: Progress | None, offset: int) -> Progress | None:
+    if progress is None:
+        return None
+    return lambda i, n: progress(offset + i, None)
+
+
+__all__ = [
+    "CompareResult",
+    "GroundTruth",
+    "RunSummary",
+    "RunTrace",
+    "compare",
+    "error_series",
+    "ground_truth_of",
+    "load_scans",
+    "run_gatmo",
+    "score",
+    "OCCUPIED",
+]
+
+
+# --------------------------------------------------------------------------------- demo
+def demo(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: int = 3,
+         progress: Progress | None = None) -> CompareResult:
+    """``gatmo demo``: simulate the default scenario, then compare static vs gatmo on it."""
+    from gatmo.datasets.sim import simulate_scenario
+
+    out = Path(out_dir)
+    scen = simulate_scenario(out / "scenario", preset=preset, runs=runs, seed=seed)
+    return compare(
+        scen.map_yaml,
+        scen.logs,
+        out / "compare",
+        scenario_json=scen.scenario_json,
+        progress=progress,
+    )

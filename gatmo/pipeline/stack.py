@@ -1,0 +1,178 @@
+"""The full stack of the GATMO paper (Fig. 3): localizer + scan matcher + object map.
+
+Per scan:
+
+1. the Monte Carlo localizer takes odometry and the scan and gives the global pose with its
+   particle covariance;
+2. the scan matcher registers the scan in its own frame (``T_match_base``); gatmo keeps the offset
+   ``T_map_match`` between the matcher's frame and the map and resets it to the localizer's estimate
+   whenever the particle covariance says the filter is confident (paper, Sec. IV-B: "We use the
+   covariance of the AMCL's particle filter as an indicator of when to reset the scan matching
+   offset"); the output pose is ``T_map_match * T_match_base``;
+3. GATMO lays the scan onto the object map from that precise pose (absence only while confident);
+4. the cells GATMO changed go back into the localizer's likelihood field (region updates only), so
+   moved furniture helps localization instead of hurting it.
+
+Only numpy and gatmo's algorithm types are used here; files are the business of
+:mod:`gatmo.pipeline.runs`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gatmo.config import GatmoModel
+from gatmo.datasets.types import Scan
+from gatmo.geometry import compose, inverse, relative, wrap_angle
+from gatmo.maps.grid import OccupancyGrid
+
+
+class FusionConfig(GatmoModel):
+    """When the scan matcher's offset is reset to the localizer's estimate.
+
+    The localizer is *confident* when it ran a sensor update on this scan, its heaviest cluster
+    has position standard deviations below ``reset_max_std_xy_m`` and heading standard deviation
+    below ``reset_max_std_theta_deg``. GATMO's absence test runs only while the pose is confident
+    and the last reset is at most ``confident_for_m`` of travel old.
+    """
+
+    use_scan_matcher: bool = True
+    reset_max_std_xy_m: float = 0.15
+    reset_max_std_theta_deg: float = 5.0
+    confident_for_m: float = 2.0
+    max_offset_jump_m: float = 1.0
+
+
+@dataclass
+class StackStep:
+    """What one scan did. ``pose_xytheta`` is the published base pose in the map frame."""
+
+    stamp_s: float
+    pose_xytheta: np.ndarray
+    localizer_pose_xytheta: np.ndarray
+    cov: np.ndarray
+    confident: bool
+    reset: bool
+    events: list = field(default_factory=list)
+    map_changed: bool = False
+    ms: float = 0.0
+
+
+def is_confident(estimate, fusion: FusionConfig) -> bool:
+    """The paper's reset test on the particle covariance (Sec. IV-B)."""
+    if not getattr(estimate, "updated", True):
+        return False
+    cov = np.asarray(estimate.cov, dtype=float)
+    if not np.all(np.isfinite(cov)):
+        return False
+    std_xy = float(np.sqrt(max(cov[0, 0], cov[1, 1], 0.0)))
+    std_th = float(np.degrees(np.sqrt(max(cov[2, 2], 0.0))))
+    return std_xy <= fusion.reset_max_std_xy_m and std_th <= fusion.reset_max_std_theta_deg
+
+
+class LocalizationStack:
+    """Localizer, optional scan matcher and optional GATMO mapper, stepped scan by scan.
+
+    Args:
+        localizer: a :class:`gatmo.localization.mcl.MonteCarloLocalizer` (or anything with
+            ``update(odom_pose_xytheta, scan) -> PoseEstimate`` and
+            ``update_map_region(cells_new, ix0, iy0)``).
+        matcher: a scan matcher with ``register(scan) -> MatchResult`` whose ``pose_xytheta`` is
+            the base pose in the matcher's own frame, or None (localizer pose published as is).
+        mapper: a :class:`gatmo.objects.mapper.GatmoMapper` or None (static map).
+        fusion: reset thresholds.
+    """
+
+    def __init__(self, localizer, matcher=None, mapper=None, fusion: FusionConfig | None = None):
+        self.localizer = localizer
+        self.matcher = matcher
+        self.mapper = mapper
+        self.fusion = fusion or FusionConfig()
+        self.T_map_match: np.ndarray | None = None
+        self._travel_since_reset_m = np.inf
+        self._last_pose: np.ndarray | None = None
+        self.resets: list[tuple[float, str, np.ndarray]] = []  # (stamp_s, why, pose)
+        self.n_scans = 0
+        self.n_map_updates = 0
+
+    def begin_run(self, run_id: int) -> None:
+        """Start a new log: the matcher's frame is new, the object map carries over."""
+        self.T_map_match = None
+        self._travel_since_reset_m = np.inf
+        self._last_pose = None
+        if self.mapper is not None:
+            self.mapper.begin_run(run_id)
+
+    def step(self, scan: Scan) -> StackStep:
+        """Process one scan; see the module docstring for the order of work."""
+        t0 = time.perf_counter()
+        est = self.localizer.update(scan.odom_pose_xytheta, scan)
+        loc_pose = np.asarray(est.pose_xytheta, dtype=float)
+        confident = is_confident(est, self.fusion)
+        reset = False
+        pose = loc_pose
+        if self.matcher is not None:
+            match = self.matcher.register(scan)
+            T_match_base = np.asarray(match.pose_xytheta, dtype=float)
+            if self.T_map_match is None or confident:
+                # the paper's reset: the matcher's frame is re-anchored on the filter's estimate
+                self.T_map_match = compose(loc_pose, inverse(T_match_base))
+                reset = True
+                why = "confident" if confident else "start"
+                self.resets.append((float(scan.stamp_s), why, loc_pose.copy()))
+                if confident:
+                    self._travel_since_reset_m = 0.0
+            pose = compose(self.T_map_match, T_match_base)
+            # A fused pose far from the localizer means the matcher diverged (e.g. people filled
+            # the scan): fall back to the localizer.
+            gap = relative(pose, loc_pose)
+            if np.hypot(gap[0], gap[1]) > self.fusion.max_offset_jump_m:
+                self.T_map_match = compose(loc_pose, inverse(T_match_base))
+                pose = loc_pose
+                reset = True
+                self.resets.append((float(scan.stamp_s), "diverged", loc_pose.copy()))
+        elif confident:
+            self._travel_since_reset_m = 0.0
+        if self._last_pose is not None:
+            self._travel_since_reset_m += float(np.hypot(*(pose[:2] - self._last_pose[:2])))
+        self._last_pose = pose.copy()
+        pose = np.array([pose[0], pose[1], float(wrap_angle(pose[2]))])
+
+        events: list = []
+        changed = False
+        if self.mapper is not None:
+            pose_ok = confident or self._travel_since_reset_m <= self.fusion.confident_for_m
+            events = self.mapper.update(pose, scan, pose_confident=pose_ok, stamp_s=scan.stamp_s)
+            for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
+                self.localizer.update_map_region(cells_new, ix0, iy0)
+                changed = True
+                self.n_map_updates += 1
+        self.n_scans += 1
+        return StackStep(
+            stamp_s=float(scan.stamp_s),
+            pose_xytheta=pose,
+            localizer_pose_xytheta=loc_pose,
+            cov=np.asarray(est.cov, dtype=float),
+            confident=confident,
+            reset=reset,
+            events=list(events),
+            map_changed=changed,
+            ms=(time.perf_counter() - t0) * 1e3,
+        )
+
+    def end_run(self) -> list:
+        """Close a log: GATMO adds dominant chairs in Gamma to the map (paper, Sec. V)."""
+        if self.mapper is None:
+            return []
+        events = list(self.mapper.end_run())
+        for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
+            self.localizer.update_map_region(cells_new, ix0, iy0)
+            self.n_map_updates += 1
+        return events
+
+    def current_grid(self, base: OccupancyGrid) -> OccupancyGrid:
+        """The map the localizer is using now (the reconfigured map with GATMO, else ``base``)."""
+        return self.mapper.grid() if self.mapper is not None else base

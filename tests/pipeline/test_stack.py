@@ -1,0 +1,123 @@
+"""The fusion of localizer and scan matcher (offset reset on a confident covariance), with
+stand-ins whose answers are known exactly."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gatmo.geometry import compose, relative
+from gatmo.pipeline.stack import FusionConfig, LocalizationStack, is_confident
+from tests.helpers import make_scan, room_grid
+
+
+@dataclass
+class Est:
+    pose_xytheta: np.ndarray
+    cov: np.ndarray
+    updated: bool = True
+
+
+class ScriptedLocalizer:
+    """Returns the true pose plus a fixed bias, confident only on scripted scans."""
+
+    def __init__(self, truth, confident_at, bias=(0.0, 0.0, 0.0)):
+        self.truth, self.confident_at, self.bias = truth, set(confident_at), np.array(bias)
+        self.i = 0
+        self.regions = []
+
+    def update(self, odom, scan):
+        i = self.i
+        self.i += 1
+        std = 0.05 if i in self.confident_at else 0.6
+        return Est(self.truth[i] + self.bias, np.diag([std**2, std**2, 0.01**2]))
+
+    def update_map_region(self, cells, ix0, iy0):
+        self.regions.append((cells.shape, ix0, iy0))
+
+
+class DriftingMatcher:
+    """Registers each scan exactly in its own frame: T_match_base = T_match_map * truth."""
+
+    def __init__(self, truth, T_match_map):
+        self.truth, self.T = truth, np.asarray(T_match_map, dtype=float)
+        self.i = 0
+
+    def register(self, scan):
+        p = compose(self.T, self.truth[self.i])
+        self.i += 1
+
+        @dataclass
+        class M:
+            pose_xytheta: np.ndarray
+
+        return M(p)
+
+
+def _truth(n=30):
+    t = np.linspace(0, 1, n)
+    return np.stack([1 + 3 * t, 2 + np.sin(3 * t), 0.5 * t], axis=1)
+
+
+def _scans(n):
+    grid = room_grid()
+    return [make_scan(grid, (2.0, 2.0, 0.0), n_beams=5, stamp_s=float(i)) for i in range(n)]
+
+
+def test_offset_reset_makes_matcher_pose_land_on_map_frame():
+    truth = _truth()
+    n = len(truth)
+    loc = ScriptedLocalizer(truth, confident_at=[5], bias=(0.3, 0.0, 0.0))
+    matcher = DriftingMatcher(truth, T_match_map=(10.0, -4.0, 1.0))
+    stack = LocalizationStack(loc, matcher, None, FusionConfig())
+    stack.begin_run(1)
+    out = [stack.step(s) for s in _scans(n)]
+    # before the first confident update the stack follows the (biased) localizer via the offset
+    # set on the first scan; from scan 5 on the offset equals the localizer's confident estimate,
+    # so every later pose is truth + the bias seen at the reset, carried exactly by the matcher.
+    for i in range(5, n):
+        expected = compose(compose(truth[5] + [0.3, 0, 0], relative(truth[5], truth[5])),
+                           relative(truth[5], truth[i]))
+        np.testing.assert_allclose(out[i].pose_xytheta, expected, atol=1e-9)
+    resets = [i for i, o in enumerate(out) if o.reset]
+    assert resets == [0, 5]
+    assert [r[1] for r in stack.resets] == ["start", "confident"]
+
+
+def test_unconfident_localizer_never_moves_the_offset():
+    truth = _truth()
+    loc = ScriptedLocalizer(truth, confident_at=[0])
+    matcher = DriftingMatcher(truth, T_match_map=(0.0, 0.0, 0.0))
+    stack = LocalizationStack(loc, matcher, None, FusionConfig())
+    stack.begin_run(1)
+    out = [stack.step(s) for s in _scans(len(truth))]
+    err = np.hypot(*(np.array([o.pose_xytheta for o in out])[:, :2] - truth[:, :2]).T)
+    assert err.max() < 1e-9  # exact matcher + confident start -> exact everywhere
+
+
+def test_diverged_matcher_falls_back_to_localizer():
+    truth = _truth()
+    loc = ScriptedLocalizer(truth, confident_at=[0])
+
+    class Jumpy(DriftingMatcher):
+        def register(self, scan):
+            m = super().register(scan)
+            if self.i > 11:  # from scan index 11 on
+                m.pose_xytheta = m.pose_xytheta + np.array([5.0, 0.0, 0.0])
+            return m
+
+    stack = LocalizationStack(loc, Jumpy(truth, (0, 0, 0)), None, FusionConfig())
+    stack.begin_run(1)
+    out = [stack.step(s) for s in _scans(len(truth))]
+    assert np.hypot(*(out[11].pose_xytheta[:2] - truth[11][:2])) < 1e-9
+    assert out[11].reset
+
+
+def test_is_confident_thresholds():
+    f = FusionConfig(reset_max_std_xy_m=0.1, reset_max_std_theta_deg=2.0)
+    assert is_confident(Est(np.zeros(3), np.diag([0.09**2, 0.05**2, np.radians(1.9) ** 2])), f)
+    assert not is_confident(Est(np.zeros(3), np.diag([0.11**2, 0.05**2, 0.0])), f)
+    assert not is_confident(Est(np.zeros(3), np.diag([0.0, 0.0, np.radians(2.1) ** 2])), f)
+    assert not is_confident(Est(np.zeros(3), np.eye(3) * 1e-6, updated=False), f)
+    assert not is_confident(Est(np.zeros(3), np.full((3, 3), np.nan)), f)
