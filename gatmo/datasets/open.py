@@ -1,0 +1,57 @@
+"""Open any supported log by its suffix or content, or by an explicit format."""
+
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+
+from gatmo.errors import FormatError
+
+FORMATS = ("carmen", "rosbag", "wean")
+
+
+def sniff_format(path: str | Path) -> str:
+    """carmen | rosbag | wean, from the suffix and the first lines."""
+    p = Path(path)
+    if p.is_dir() and (p / "metadata.yaml").exists():
+        return "rosbag"
+    if p.suffix in (".bag", ".db3", ".mcap"):
+        return "rosbag"
+    if not p.exists():
+        raise FormatError("no such file", file=p)
+    try:
+        with open(p, "rb") as f:
+            head = f.read(2)
+        opener = gzip.open if head == b"\x1f\x8b" else open
+        with opener(p, "rt", errors="replace") as fh:
+            for _, line in zip(range(200), fh, strict=False):
+                parts = line.split()
+                if not parts or parts[0].startswith("#"):
+                    continue
+                if parts[0] == "L" and len(parts) == 188:
+                    return "wean"
+                if parts[0] == "O" and len(parts) == 5:
+                    return "wean"
+                if parts[0].isupper() and parts[0].isalnum():
+                    return "carmen"
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        raise FormatError(f"cannot read: {exc}", file=p) from None
+    raise FormatError(f"unknown log format; use --format {' | '.join(FORMATS)}", file=p)
+
+
+def open_log(path: str | Path, fmt: str | None = None, **kw):
+    """A ScanSource for ``path``: a CARMEN log, a ROS 1/2 bag, or a CMU Wean log."""
+    fmt = fmt or sniff_format(path)
+    if fmt == "carmen":
+        from gatmo.datasets.carmen import CarmenLog
+
+        return CarmenLog(path, **kw)
+    if fmt == "rosbag":
+        from gatmo.datasets.rosbag import RosBag
+
+        return RosBag(path, **kw)
+    if fmt == "wean":
+        from gatmo.datasets.wean import WeanLog
+
+        return WeanLog(path, **kw)
+    raise FormatError(f"unknown format {fmt!r}: {' | '.join(FORMATS)}", field="--format")

@@ -1,0 +1,122 @@
+"""CMU Wean Hall data: ``robotdata*.log(.gz)`` (``O``/``L`` lines, centimetres) and ``wean.dat``.
+
+``O x y theta ts``: odometry (cm, rad). ``L x y theta xl yl thetal r1..r180 ts``: the robot's
+and the laser's odometry poses and 180 ranges (cm) from -90 to +90 degrees. The map file has a
+header (``robot_specifications->...``, ``global_map[0]: W H``) then rows of P(occupied) with
+-1 for unknown.
+"""
+
+from __future__ import annotations
+
+import gzip
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from gatmo.datasets.types import ReadStats, Scan
+from gatmo.errors import DataError, FormatError
+from gatmo.geometry import relative
+from gatmo.maps.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+
+
+def _open(path: Path):
+    with open(path, "rb") as f:
+        gz = f.read(2) == b"\x1f\x8b"
+    return gzip.open(path, "rt", errors="replace") if gz else open(path, errors="replace")
+
+
+class WeanLog:
+    """A CMU ``robotdata`` log as a ScanSource (metres, laser pose relative to the base)."""
+
+    def __init__(self, path: str | Path, *, skip_bad: bool = False) -> None:
+        self.path = str(path)
+        self.skip_bad = skip_bad
+        self.stats = ReadStats()
+
+    def __iter__(self) -> Iterator[Scan]:
+        stats = ReadStats()
+        angles = np.radians(np.arange(180) - 90.0 + 0.5)
+        last = -np.inf
+        try:
+            fh = _open(Path(self.path))
+        except OSError as exc:
+            raise FormatError(f"cannot read: {exc.strerror}", file=self.path) from None
+        with fh:
+            for lineno, line in enumerate(fh, start=1):
+                parts = line.split()
+                if not parts:
+                    continue
+                stats.records += 1
+                if parts[0] != "L":
+                    continue
+                if len(parts) != 1 + 6 + 180 + 1:
+                    msg = f"L line needs 187 fields, found {len(parts) - 1}"
+                    if self.skip_bad:
+                        stats.skip(f"line {lineno}: {msg}")
+                        continue
+                    raise FormatError(msg, file=self.path, line=lineno, field="L")
+                try:
+                    v = np.array(parts[1:], dtype=float)
+                except ValueError:
+                    if self.skip_bad:
+                        stats.skip(f"line {lineno}: non-numeric")
+                        continue
+                    raise FormatError("non-numeric field", file=self.path, line=lineno) from None
+                t = float(v[-1])
+                if t <= last:
+                    if self.skip_bad:
+                        stats.skip(f"line {lineno}: stamp does not increase")
+                        continue
+                    raise DataError(f"timestamp {t} does not increase", file=self.path,
+                                    line=lineno)
+                last = t
+                robot = np.array([v[0] / 100.0, v[1] / 100.0, v[2]])
+                laser = np.array([v[3] / 100.0, v[4] / 100.0, v[5]])
+                stats.scans += 1
+                yield Scan(stamp_s=t, ranges_m=v[6:186] / 100.0, angles_rad=angles,
+                           range_min_m=0.0, range_max_m=81.83, odom_pose_xytheta=robot,
+                           laser_pose_xytheta=relative(robot, laser))
+        self.stats = stats
+
+
+def load_wean_map(path: str | Path) -> OccupancyGrid:
+    """The Wean Hall map as an OccupancyGrid (10 cm).
+
+    instruct.txt calls the values P(occupied), but the file holds P(free): 68 % of its known
+    cells are above 0.65 in a map that is mostly corridor, and CMU's own reader (16-833
+    ``map_reader.py``) flips them. So p_occ = 1 - value; p_occ > 0.65 occupied, < 0.196 free
+    (map_server's defaults), -1 unknown. Rows of the file are x, columns y.
+    """
+    path = Path(path)
+    res_cm = 10.0
+    size = None
+    rows = []
+    with _open(path) as fh:
+        for lineno, line in enumerate(fh, start=1):
+            s = line.strip()
+            if not s:
+                continue
+            if s.startswith("robot_specifications->resolution"):
+                res_cm = float(s.split()[-1])
+                continue
+            if s.startswith("robot_specifications"):
+                continue
+            if s.startswith("global_map[0]"):
+                w, h = (int(x) for x in s.split(":")[1].split())
+                size = (w, h)
+                continue
+            try:
+                rows.append(np.array(s.split(), dtype=float))
+            except ValueError:
+                raise FormatError("non-numeric map value", file=path, line=lineno) from None
+    if size is None or len(rows) != size[0]:
+        raise FormatError(f"expected a global_map header and {size} rows, found {len(rows)}",
+                          file=path)
+    p = np.vstack(rows)  # p[x, y]
+    cells = np.full(p.shape, UNKNOWN, dtype=np.int8)
+    known = p >= 0
+    p_occ = 1.0 - p
+    cells[known & (p_occ > 0.65)] = OCCUPIED
+    cells[known & (p_occ < 0.196)] = FREE
+    return OccupancyGrid(cells.T.copy(), res_cm / 100.0, (0.0, 0.0, 0.0))

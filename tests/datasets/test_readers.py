@@ -1,0 +1,198 @@
+"""Readers and writers: round trips, hand-made files, bad input, and every real file."""
+
+from __future__ import annotations
+
+import gzip
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gatmo.datasets.carmen import CarmenLog, write_carmen
+from gatmo.datasets.info import summarize
+from gatmo.datasets.metrics import ate, relations_error
+from gatmo.datasets.open import open_log, sniff_format
+from gatmo.datasets.relations import Relations, read_relations
+from gatmo.datasets.tum import read_tum, write_tum
+from gatmo.datasets.types import Scan
+from gatmo.errors import DataError, FormatError
+from gatmo.geometry import compose
+
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+def need(rel: str) -> Path:
+    p = DATA / rel
+    if not p.exists():
+        pytest.skip(f"{p} not found: real data absent")
+    return p
+
+
+def _scans(n=5, gt=True):
+    rng = np.random.default_rng(0)
+    out = []
+    for i in range(n):
+        out.append(Scan(
+            stamp_s=100.0 + 0.1 * i,
+            ranges_m=rng.uniform(0.1, 9.0, 91),
+            angles_rad=np.linspace(-np.pi / 2, np.pi / 2, 91),
+            range_min_m=0.0,
+            range_max_m=10.0,
+            odom_pose_xytheta=np.array([0.1 * i, -0.05 * i, 0.02 * i]),
+            laser_pose_xytheta=np.array([0.2, 0.0, 0.0]),
+            gt_pose_xytheta=np.array([1 + 0.1 * i, 2.0, 0.5]) if gt else None,
+        ))
+    return out
+
+
+@pytest.mark.parametrize("name", ["run.clf", "run.clf.gz"])
+def test_carmen_round_trip(tmp_path, name):
+    scans = _scans()
+    write_carmen(tmp_path / name, scans)
+    back = list(CarmenLog(tmp_path / name))
+    assert len(back) == len(scans)
+    for a, b in zip(scans, back, strict=True):
+        assert abs(a.stamp_s - b.stamp_s) < 1e-9
+        np.testing.assert_allclose(a.ranges_m, b.ranges_m, atol=1e-6)
+        np.testing.assert_allclose(a.angles_rad, b.angles_rad, atol=1e-9)
+        np.testing.assert_allclose(a.odom_pose_xytheta, b.odom_pose_xytheta, atol=1e-9)
+        np.testing.assert_allclose(a.laser_pose_xytheta, b.laser_pose_xytheta, atol=1e-9)
+        np.testing.assert_allclose(a.gt_pose_xytheta, b.gt_pose_xytheta, atol=1e-9)
+        assert b.range_max_m == 10.0
+    assert sniff_format(tmp_path / name) == "carmen"
+
+
+FLASER_OLD = "FLASER 3 1.0 2.0 81.9 0.5 0.6 0.1 0.4 0.5 0.1 {t}\n"
+FLASER_NEW = "FLASER 3 1.0 2.0 81.9 0.5 0.6 0.1 0.4 0.5 0.1 {t} host {t}\n"
+
+
+def test_flaser_old_and_new_formats_and_unknown_messages(tmp_path):
+    p = tmp_path / "a.log"
+    p.write_text("# c\nPARAM laser_front_laser_fov 90 h 0\n" + FLASER_OLD.format(t=1.0)
+                 + "NEFF 3.2\n" + FLASER_NEW.format(t=2.0))
+    log = CarmenLog(p, pose_is_reference=True)
+    scans = list(log)
+    assert len(scans) == 2 and log.unknown_messages == {"NEFF": 1}
+    np.testing.assert_allclose(scans[0].angles_rad, np.radians([-45, 0, 45]))
+    np.testing.assert_allclose(scans[1].odom_pose_xytheta, [0.4, 0.5, 0.1])
+    np.testing.assert_allclose(scans[1].gt_pose_xytheta, [0.5, 0.6, 0.1])
+    assert scans[0].valid.tolist() == [True, True, False]  # 81.9 m: SICK "no return"
+
+
+@pytest.mark.parametrize(
+    "text, line, cls",
+    [
+        ("FLASER 3 1.0 2.0 0.5 0.6 0.1 0.4 0.5 0.1\n", 1, FormatError),  # truncated
+        ("ODOM 1 2\n", 1, FormatError),
+        ("FLASER 3 1.0 x 3 0.5 0.6 0.1 0.4 0.5 0.1 1.0\n", 1, FormatError),
+        (FLASER_OLD.format(t=2.0) + FLASER_OLD.format(t=1.0), 2, DataError),  # backwards
+    ],
+)
+def test_carmen_bad_lines_name_file_and_line(tmp_path, text, line, cls):
+    p = tmp_path / "bad.log"
+    p.write_text(text)
+    with pytest.raises(cls) as e:
+        list(CarmenLog(p))
+    assert e.value.line == line and e.value.file == str(p)
+    log = CarmenLog(p, skip_bad=True)
+    list(log)
+    assert log.stats.skipped == 1
+
+
+def test_tum_round_trip_and_errors(tmp_path):
+    t = np.array([1.0, 2.5, 3.0])
+    p = np.array([[0, 0, 0.1], [1, 2, -3.0], [3, 4, 3.1]])
+    write_tum(tmp_path / "a.tum", t, p)
+    t2, p2 = read_tum(tmp_path / "a.tum")
+    np.testing.assert_allclose(t2, t)
+    np.testing.assert_allclose(p2, p, atol=1e-9)
+    (tmp_path / "b.tum").write_text("1 2 3\n")
+    with pytest.raises(FormatError) as e:
+        read_tum(tmp_path / "b.tum")
+    assert e.value.line == 1
+
+
+def test_metrics_known_answers():
+    t = np.arange(5.0)
+    gt = np.zeros((5, 3))
+    est = gt.copy()
+    est[:, 0] = [0, 0, 0, 0, 1.0]
+    a = ate(t, est, t, gt)
+    assert np.isclose(a["rmse_m"], np.sqrt(1 / 5)) and a["max_m"] == 1 and a["lost_fraction"] == 0.2
+    poses = np.array([[0, 0, 0], [1, 0, np.pi / 2], [1, 1, np.pi / 2]])
+    rel = Relations(np.array([0.0, 1.0]), np.array([1.0, 2.0]),
+                    np.array([[1.0, 0, np.pi / 2], [1.1, 0, 0]]))
+    r = relations_error(np.arange(3.0), poses, rel)
+    assert r["n_used"] == 2 and np.isclose(r["trans_mean_m"], 0.05)
+
+
+def test_rosbag_round_trip(tmp_path):
+    from gatmo.datasets.rosbag import RosBag, write_ros2_bag
+
+    scans = _scans(gt=True)
+    for s in scans:
+        s.laser_pose_xytheta = np.zeros(3)
+    write_ros2_bag(tmp_path / "b", scans, gt_topic="/base_pose_ground_truth")
+    back = list(open_log(tmp_path / "b"))
+    assert len(back) == len(scans)
+    for a, b in zip(scans, back, strict=True):
+        np.testing.assert_allclose(a.ranges_m, b.ranges_m, atol=1e-5)
+        np.testing.assert_allclose(a.odom_pose_xytheta, b.odom_pose_xytheta, atol=1e-9)
+        np.testing.assert_allclose(a.gt_pose_xytheta, b.gt_pose_xytheta, atol=1e-9)
+    with pytest.raises(FormatError) as e:
+        list(RosBag(tmp_path / "b", scan_topic="/nope"))
+    assert "/nope" in str(e.value) and "/scan" in str(e.value)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "rel, scans, beams",
+    [
+        ("slam-benchmark/intel.sort.bag", 13631, 180),
+        ("slam-benchmark/aces.sort.bag", 7374, 180),
+        ("slam-benchmark/mit-csail.sort.bag", 1988, 361),
+        ("slam-benchmark/mit-csail.clf", 1988, 361),
+        ("uob-meeting/simpath2.bag", 634, 500),
+        ("freiburg-course/csail.log", 686, 361),
+        ("radish-corrected/aces-corrected.log.gz", 440, 180),
+    ],
+)
+def test_real_logs_load(rel, scans, beams):
+    s = summarize(need(rel))
+    assert s["scans"] == scans and s["beams"] == beams
+
+
+def test_real_wean():
+    from gatmo.datasets.wean import WeanLog, load_wean_map
+
+    g = load_wean_map(need("cmu-wean/wean.dat.gz"))
+    assert g.cells.shape == (800, 800) and g.resolution_m == 0.1
+    assert g.free.sum() > 2 * g.occupied.sum()  # a building: mostly free (P(free) in the file)
+    log = list(WeanLog(need("cmu-wean/robotdata1.log.gz")))
+    assert len(log) > 500 and log[0].num_beams == 180
+    assert 0.2 < np.hypot(*log[0].laser_pose_xytheta[:2]) < 0.3  # laser ~25 cm ahead
+
+
+def test_intel_corrected_joins_relations():
+    rel = read_relations(need("slam-benchmark/intel.relations"))
+    log = CarmenLog(need("radish-corrected/intel-corrected.log.gz"), pose_is_reference=True,
+                    skip_bad=True)
+    scans = list(log)
+    t = np.array([s.stamp_s for s in scans]) + 976052857.33753
+    p = np.array([s.gt_pose_xytheta for s in scans])
+    r = relations_error(t, p, rel)  # relation stamps match scan stamps within 2 ms
+    assert r["n_used"] == 40
+    assert abs(r["trans_mean_m"] - 0.043) < 0.001 and abs(r["rot_mean_deg"] - 0.70) < 0.01
+
+
+def test_relations_file_parses():
+    r = read_relations(need("slam-benchmark/mit-csail.relations"))
+    assert len(r) > 100 and r.rel_xytheta.shape == (len(r), 3)
+
+
+def test_gz_garbage_is_a_format_error(tmp_path):
+    p = tmp_path / "x.log.gz"
+    p.write_bytes(gzip.compress(b"\x00\x01\x02 nonsense"))
+    with pytest.raises(FormatError):
+        list(open_log(p))
+    _ = compose
