@@ -1,0 +1,77 @@
+"""The localizer's configuration: every AMCL parameter, with units in the names.
+
+Defaults are Nav2's (``nav2_amcl``); :mod:`gatmo.localization.params` maps ROS 1 and Nav2
+parameter files onto this model (ROS 1 files get ROS 1 defaults).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from gatmo.config import GatmoModel
+
+OdomModel = Literal["diff", "diff-corrected", "omni", "omni-corrected"]
+LaserModel = Literal["likelihood_field", "likelihood_field_prob", "beam"]
+
+
+class AmclConfig(GatmoModel):
+    """Monte Carlo localization parameters (AMCL names in the comments)."""
+
+    # filter
+    min_particles: int = Field(500, ge=1)  # min_particles
+    max_particles: int = Field(2000, ge=1)  # max_particles
+    kld_err: float = Field(0.05, gt=0, lt=1)  # kld_err / pf_err
+    kld_z: float = Field(0.99, gt=0)  # kld_z / pf_z (upper standard normal quantile)
+    update_min_d_m: float = Field(0.25, ge=0)  # update_min_d
+    update_min_a_rad: float = Field(0.2, ge=0)  # update_min_a
+    resample_interval: int = Field(1, ge=1)  # resample_interval
+    selective_resampling: bool = False
+    recovery_alpha_slow: float = Field(0.0, ge=0, le=1)
+    recovery_alpha_fast: float = Field(0.0, ge=0, le=1)
+    # laser
+    laser_model: LaserModel = "likelihood_field"
+    z_hit: float = Field(0.5, ge=0, le=1)
+    z_short: float = Field(0.05, ge=0, le=1)
+    z_max: float = Field(0.05, ge=0, le=1)
+    z_rand: float = Field(0.5, ge=0, le=1)
+    sigma_hit_m: float = Field(0.2, gt=0)
+    lambda_short: float = Field(0.1, gt=0)
+    laser_likelihood_max_dist_m: float = Field(2.0, gt=0)
+    laser_min_range_m: float | None = Field(
+        None, description="None: use the scan's own range_min (AMCL's -1.0)"
+    )
+    laser_max_range_m: float | None = Field(
+        None, description="None: use the scan's own range_max (AMCL's -1.0)"
+    )
+    max_beams: int = Field(60, ge=2)
+    do_beamskip: bool = False
+    beam_skip_distance_m: float = Field(0.5, gt=0)
+    beam_skip_threshold: float = Field(0.3, ge=0, le=1)
+    beam_skip_error_threshold: float = Field(0.9, ge=0, le=1)
+    # odometry
+    odom_model: OdomModel = "diff-corrected"
+    alpha1: float = Field(0.2, ge=0)
+    alpha2: float = Field(0.2, ge=0)
+    alpha3: float = Field(0.2, ge=0)
+    alpha4: float = Field(0.2, ge=0)
+    alpha5: float = Field(0.2, ge=0)
+    odom_jump_m: float = Field(1.0, gt=0, description="one-step odometry jump treated as reset")
+    odom_jump_rad: float = Field(1.0, gt=0)
+    # initial pose
+    initial_pose_xytheta: tuple[float, float, float] | None = None
+    initial_cov_xx_m2: float = Field(0.25, ge=0)
+    initial_cov_yy_m2: float = Field(0.25, ge=0)
+    initial_cov_aa_rad2: float = Field((3.141592653589793 / 12) ** 2, ge=0)
+    global_localization_on_start: bool = False
+    converged_dist_m: float = Field(0.5, gt=0)  # pf->dist_threshold
+    seed: int = 0
+
+    @model_validator(mode="after")
+    def _check(self) -> AmclConfig:
+        if self.min_particles > self.max_particles:
+            raise ValueError(
+                f"min_particles ({self.min_particles}) > max_particles ({self.max_particles})"
+            )
+        return self

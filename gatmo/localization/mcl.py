@@ -1,0 +1,272 @@
+"""Monte Carlo localization as ROS/Nav2 AMCL runs it (``laserReceived``), as a library.
+
+Per scan: the odometry step since the last filter update is accumulated; once it exceeds
+``update_min_d`` / ``update_min_a`` (or on the first scan) the particles are moved by the motion
+model, weighed by the sensor model, the recovery averages updated, and the set resampled every
+``resample_interval`` updates with KLD-sampling. Between filter updates the published pose is
+the last estimate carried forward by odometry (what AMCL's map->odom transform gives).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gatmo.datasets.types import Scan
+from gatmo.errors import MapError
+from gatmo.geometry import compose, relative, wrap_angle
+from gatmo.localization.config import AmclConfig
+from gatmo.localization.motion import sample_motion
+from gatmo.localization.particles import cluster_estimate, kld_resample
+from gatmo.localization.sensor import SensorModel
+from gatmo.maps.grid import OCCUPIED, OccupancyGrid
+from gatmo.maps.likelihood import LikelihoodField
+
+
+@dataclass
+class PoseEstimate:
+    """The localizer's answer for one scan.
+
+    pose_xytheta: base pose in the map frame (3,); cov: (3, 3) of the heaviest cluster at the
+    last filter update; updated: the filter ran a sensor update on this scan; converged: all
+    particles within ``converged_dist_m`` of the mean (AMCL's pf->converged).
+    """
+
+    stamp_s: float
+    pose_xytheta: np.ndarray
+    cov: np.ndarray
+    n_particles: int
+    converged: bool
+    updated: bool
+    n_valid_beams: int = 0
+
+
+@dataclass
+class LocalizerStats:
+    scans: int = 0
+    sensor_updates: int = 0
+    skipped_no_valid_beams: int = 0
+    odom_resets: int = 0
+    random_injected: int = 0
+    map_region_updates: int = 0
+    update_ms: list = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        ms = np.array(self.update_ms) if self.update_ms else np.array([np.nan])
+        return {"scans": self.scans, "sensor_updates": self.sensor_updates,
+                "skipped_no_valid_beams": self.skipped_no_valid_beams,
+                "odom_resets": self.odom_resets, "random_injected": self.random_injected,
+                "map_region_updates": self.map_region_updates,
+                "ms_per_update_median": float(np.median(ms))}
+
+
+class MonteCarloLocalizer:
+    """AMCL as a library. ``grid`` is copied: map changes go through :meth:`set_map` or
+    :meth:`update_map_region`."""
+
+    def __init__(self, grid: OccupancyGrid, cfg: AmclConfig,
+                 rng: np.random.Generator | None = None) -> None:
+        self.cfg = cfg
+        self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
+        self.field = LikelihoodField(grid.copy(), cfg.laser_likelihood_max_dist_m)
+        self.sensor = SensorModel(self.field, cfg)
+        self._free_xy: np.ndarray | None = None
+        self.particles = np.zeros((0, 3))
+        self.weights = np.zeros(0)
+        self.w_slow = 0.0
+        self.w_fast = 0.0
+        self.stats = LocalizerStats()
+        self._odom_at_update: np.ndarray | None = None
+        self._odom_last: np.ndarray | None = None
+        self._est = np.zeros(3)
+        self._cov = np.eye(3)
+        self._converged = False
+        self._updates_since_resample = 0
+        self._force_update = True
+        if cfg.initial_pose_xytheta is not None:
+            self.set_initial_pose(np.array(cfg.initial_pose_xytheta), self.initial_cov())
+        elif cfg.global_localization_on_start:
+            self.global_localization()
+
+    @classmethod
+    def from_config(cls, cfg: AmclConfig, grid: OccupancyGrid,
+                    rng: np.random.Generator | None = None) -> MonteCarloLocalizer:
+        return cls(grid, cfg, rng)
+
+    # ------------------------------------------------------------------ set-up
+    @property
+    def grid(self) -> OccupancyGrid:
+        return self.field.grid
+
+    def initial_cov(self) -> np.ndarray:
+        c = self.cfg
+        return np.diag([c.initial_cov_xx_m2, c.initial_cov_yy_m2, c.initial_cov_aa_rad2])
+
+    def set_initial_pose(self, pose_xytheta, cov: np.ndarray | None = None) -> None:
+        """Gaussian particle cloud around a map pose; refuses poses off the map or in a wall."""
+        pose = np.asarray(pose_xytheta, dtype=float)
+        cell = self.grid.world_to_cell(pose[None, :2])
+        if not self.grid.in_bounds(cell)[0]:
+            raise MapError(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}) is outside the map",
+                           field="initial_pose")
+        if self.grid.cells[cell[0, 1], cell[0, 0]] == OCCUPIED:
+            raise MapError(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}) is in an occupied cell",
+                           field="initial_pose")
+        cov = self.initial_cov() if cov is None else np.asarray(cov, dtype=float)
+        n = self.cfg.max_particles
+        pts = self.rng.multivariate_normal(pose, cov, size=n, method="cholesky")
+        pts[:, 2] = wrap_angle(pts[:, 2])
+        self._reset_particles(pts)
+        self._est, self._cov = pose.copy(), cov.copy()
+
+    def global_localization(self) -> None:
+        """Particles uniform over the free cells, uniform heading."""
+        free = self._free_cells()
+        if len(free) == 0:
+            raise MapError("the map has no free cell to spread particles over")
+        n = self.cfg.max_particles
+        pick = free[self.rng.integers(len(free), size=n)]
+        jitter = self.rng.uniform(-0.5, 0.5, size=(n, 2)) * self.grid.resolution_m
+        pts = np.column_stack([pick + jitter, self.rng.uniform(-np.pi, np.pi, n)])
+        self._reset_particles(pts)
+        self._est, self._cov = cluster_estimate(self.particles, self.weights)
+
+    def _reset_particles(self, pts: np.ndarray) -> None:
+        self.particles = pts
+        self.weights = np.full(len(pts), 1.0 / len(pts))
+        self.w_slow = self.w_fast = 0.0
+        self._converged = False
+        self._force_update = True
+
+    def _free_cells(self) -> np.ndarray:
+        if self._free_xy is None:
+            self._free_xy = self.grid.free_cells_world()
+        return self._free_xy
+
+    # ------------------------------------------------------------------- maps
+    def set_map(self, grid: OccupancyGrid) -> None:
+        """A new map: the particle set is kept (Nav2), the likelihood field replaced."""
+        self.field.set_grid(grid.copy())
+        self._free_xy = None
+
+    def update_map_region(self, cells_new: np.ndarray, ix0: int, iy0: int) -> None:
+        """Cells of the map changed (furniture moved): recompute that region of the field."""
+        self.field.update_region(np.asarray(cells_new, dtype=np.int8), int(ix0), int(iy0))
+        self._free_xy = None
+        self.stats.map_region_updates += 1
+
+    def apply_grid(self, grid: OccupancyGrid) -> None:
+        """Bring the map to ``grid`` through one region update of the changed cells."""
+        if self.field.apply_grid_diff(grid) is not None:
+            self._free_xy = None
+            self.stats.map_region_updates += 1
+
+    # ----------------------------------------------------------------- update
+    def update(self, odom_pose_xytheta, scan: Scan) -> PoseEstimate:
+        """Process one scan with the odometry pose (odom frame) at its stamp."""
+        c = self.cfg
+        odom = np.asarray(odom_pose_xytheta, dtype=float)
+        self.stats.scans += 1
+        if len(self.particles) == 0:
+            self.global_localization()
+        if self._odom_at_update is None:
+            self._odom_at_update = odom.copy()
+            self._odom_last = odom.copy()
+        step = relative(self._odom_last, odom)
+        if np.hypot(step[0], step[1]) > c.odom_jump_m or abs(step[2]) > c.odom_jump_rad:
+            # wheel slip or an odometry reset: restart around the last estimate
+            self.stats.odom_resets += 1
+            cov = self.initial_cov() * 4.0
+            self.set_initial_pose(self._est, cov) if self._on_map(self._est) else \
+                self.global_localization()
+            self._odom_at_update = odom.copy()
+        self._odom_last = odom.copy()
+        delta = odom - self._odom_at_update
+        delta[2] = wrap_angle(delta[2])
+        need = (abs(delta[0]) > c.update_min_d_m or abs(delta[1]) > c.update_min_d_m
+                or abs(delta[2]) > c.update_min_a_rad or self._force_update)
+        updated = False
+        n_beams = 0
+        if need:
+            t0 = time.perf_counter()
+            moved = sample_motion(self.particles, self._odom_at_update, odom, c.odom_model,
+                                  (c.alpha1, c.alpha2, c.alpha3, c.alpha4, c.alpha5), self.rng)
+            logw, n_beams = self.sensor.weigh(moved, scan, self._converged)
+            self.particles = moved
+            self._odom_at_update = odom.copy()
+            if n_beams == 0:
+                self.stats.skipped_no_valid_beams += 1
+            else:
+                self._weigh_and_resample(logw)
+                updated = True
+                self._force_update = False
+                self.stats.sensor_updates += 1
+            self._est, self._cov = cluster_estimate(self.particles, self.weights)
+            self._converged = self._is_converged()
+            self.stats.update_ms.append((time.perf_counter() - t0) * 1e3)
+        pose = compose(self._est, relative(self._odom_at_update, odom))
+        return PoseEstimate(float(scan.stamp_s), pose, self._cov.copy(), len(self.particles),
+                            self._converged, updated, n_beams)
+
+    def _on_map(self, pose) -> bool:
+        cell = self.grid.world_to_cell(np.asarray(pose)[None, :2])
+        return bool(self.grid.in_bounds(cell)[0]) and \
+            self.grid.cells[cell[0, 1], cell[0, 0]] != OCCUPIED
+
+    def _weigh_and_resample(self, logw: np.ndarray) -> None:
+        c = self.cfg
+        # weights stay in AMCL's scale for the recovery averages: w = prior * p
+        m = float(np.max(logw))
+        w = self.weights * np.exp(logw - m)
+        total = w.sum()
+        if total <= 0 or not np.isfinite(total):
+            w = np.full(len(w), 1.0 / len(w))
+            total_raw = 0.0
+        else:
+            total_raw = total * np.exp(m)
+            w = w / total
+        self.weights = w
+        if c.recovery_alpha_slow > 0 or c.recovery_alpha_fast > 0:
+            # Prob. Rob. p. 258: the average measurement likelihood. AMCL divides the weighted
+            # sum by N once more, which makes the averages jump whenever KLD changes N; the
+            # weighted mean is N-independent.
+            w_avg = total_raw if np.isfinite(total_raw) else 0.0
+            if self.w_slow == 0.0:
+                self.w_slow = w_avg
+            else:
+                self.w_slow += c.recovery_alpha_slow * (w_avg - self.w_slow)
+            if self.w_fast == 0.0:
+                self.w_fast = w_avg
+            else:
+                self.w_fast += c.recovery_alpha_fast * (w_avg - self.w_fast)
+        self._updates_since_resample += 1
+        if self._updates_since_resample < c.resample_interval:
+            return
+        if c.selective_resampling and 1.0 / np.sum(w**2) > len(w) / 2.0:
+            return
+        self._updates_since_resample = 0
+        new = kld_resample(self.particles, w, self.rng, err=c.kld_err, z=c.kld_z,
+                           min_n=c.min_particles, max_n=c.max_particles)
+        p_inject = 0.0
+        if self.w_slow > 0:
+            p_inject = max(0.0, 1.0 - self.w_fast / self.w_slow)
+        if p_inject > 0:
+            inject = self.rng.random(len(new)) < p_inject
+            k = int(inject.sum())
+            if k:
+                free = self._free_cells()
+                pick = free[self.rng.integers(len(free), size=k)]
+                new[inject] = np.column_stack([pick, self.rng.uniform(-np.pi, np.pi, k)])
+                self.stats.random_injected += k
+                # AMCL resets w_slow and w_fast here, which stops injection after one round
+                # while the robot is still lost; Augmented MCL (Prob. Rob. Table 8.3) keeps
+                # injecting as long as the short-term average is below the long-term one.
+        self.particles = new
+        self.weights = np.full(len(new), 1.0 / len(new))
+
+    def _is_converged(self) -> bool:
+        mean = self.particles[:, :2].mean(axis=0)
+        d = np.abs(self.particles[:, :2] - mean)
+        return bool(np.all(d <= self.cfg.converged_dist_m))

@@ -1,0 +1,113 @@
+"""Laser sensor models of AMCL: likelihood field, likelihood field (prob) with beam skipping, and
+the beam model. ``weigh`` returns per-particle *log* weights so products never underflow."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gatmo.datasets.types import Scan
+from gatmo.maps.likelihood import LikelihoodField
+
+
+def select_beams(scan: Scan, max_beams: int, range_min_m: float | None,
+                 range_max_m: float | None, keep_max_range: bool):
+    """AMCL's beam subsampling (step = (n - 1) // (max_beams - 1)) and range gating.
+
+    Returns (ranges (B,), angles (B,), range_max). Readings that are NaN/inf/negative or below
+    range_min are dropped; readings at or above range_max are dropped unless ``keep_max_range``
+    (the beam model scores them as max-range readings). SICK "no return" values count as max.
+    """
+    rmax = float(range_max_m if range_max_m is not None else scan.range_max_m)
+    rmin = float(range_min_m if range_min_m is not None else scan.range_min_m)
+    n = scan.num_beams
+    step = max(1, (n - 1) // max(max_beams - 1, 1))
+    idx = np.arange(0, n, step)
+    r = scan.ranges_m[idx].copy()
+    a = scan.angles_rad[idx]
+    with np.errstate(invalid="ignore"):
+        finite = np.isfinite(r) & (r > rmin)
+        r[finite & (r >= 80.0)] = rmax  # SICK no-return
+        at_max = finite & (r >= rmax)
+    keep = finite & (~at_max | keep_max_range)
+    r = np.where(at_max, rmax, r)
+    return r[keep], a[keep], rmax
+
+
+def likelihood_field_reference(particles, laser_pose, ranges, angles, field: LikelihoodField,
+                               z_hit, z_rand, sigma_hit, range_max):
+    """numpy reference of the likelihood field kernel (N,) p = 1 + sum pz^3."""
+    from gatmo.geometry import compose
+
+    lp = compose(particles, laser_pose[None, :])
+    a = lp[:, 2:3] + angles[None, :]
+    hx = lp[:, 0:1] + ranges[None, :] * np.cos(a)
+    hy = lp[:, 1:2] + ranges[None, :] * np.sin(a)
+    z = field.distance_at(np.stack([hx.ravel(), hy.ravel()], axis=1)).reshape(hx.shape)
+    pz = z_hit * np.exp(-(z**2) / (2 * sigma_hit**2)) + z_rand / range_max
+    return 1.0 + (pz**3).sum(axis=1)
+
+
+def beam_reference(particles, laser_pose, ranges, angles, grid, z_hit, z_short, z_max, z_rand,
+                   sigma_hit, lambda_short, range_max):
+    """numpy reference of the beam model (N,)."""
+    from gatmo.geometry import compose
+    from gatmo.maps.raycast import _cast_rays_reference
+
+    lp = compose(particles, laser_pose[None, :])
+    out = np.empty(len(particles))
+    for i, pose in enumerate(lp):
+        mr = _cast_rays_reference(grid, pose, angles, range_max, step_m=grid.resolution_m / 100)
+        z = ranges - mr
+        pz = z_hit * np.exp(-(z**2) / (2 * sigma_hit**2))
+        pz = pz + np.where(z < 0, z_short * lambda_short * np.exp(-lambda_short * ranges), 0.0)
+        pz = pz + np.where(ranges >= range_max, z_max, z_rand / range_max)
+        out[i] = 1.0 + (pz**3).sum()
+    return out
+
+
+class SensorModel:
+    """Weighs particles against a scan with one of AMCL's laser models."""
+
+    def __init__(self, field: LikelihoodField, cfg) -> None:
+        self.field = field
+        self.cfg = cfg
+
+    def weigh(self, particles: np.ndarray, scan: Scan, converged: bool) -> tuple[np.ndarray, int]:
+        """Log weights (N,) and the number of beams used (0: nothing to weigh)."""
+        from gatmo.localization import _kernels as K
+
+        c = self.cfg
+        beam = c.laser_model == "beam"
+        ranges, angles, rmax = select_beams(scan, c.max_beams, c.laser_min_range_m,
+                                            c.laser_max_range_m, keep_max_range=beam)
+        if len(ranges) == 0:
+            return np.zeros(len(particles)), 0
+        g = self.field.grid
+        ox, oy = g.origin_xytheta[:2]
+        lp = np.ascontiguousarray(scan.laser_pose_xytheta, dtype=np.float64)
+        parts = np.ascontiguousarray(particles, dtype=np.float64)
+        if c.laser_model == "likelihood_field":
+            p = K.likelihood_field_kernel(parts, lp, ranges, angles, self.field.dist_m,
+                                          g.resolution_m, ox, oy, self.field.max_dist_m,
+                                          c.z_hit, c.z_rand, c.sigma_hit_m, rmax)
+            return np.log(p), len(ranges)
+        if c.laser_model == "beam":
+            p = K.beam_kernel(parts, lp, ranges, angles, g.cells, g.resolution_m, ox, oy,
+                              c.z_hit, c.z_short, c.z_max, c.z_rand, c.sigma_hit_m,
+                              c.lambda_short, rmax)
+            return np.log(p), len(ranges)
+        use = np.ones(len(ranges), dtype=np.bool_)
+        logp, zs = K.likelihood_field_prob_kernel(parts, lp, ranges, angles, self.field.dist_m,
+                                                  g.resolution_m, ox, oy,
+                                                  self.field.max_dist_m, c.z_hit, c.z_rand,
+                                                  c.sigma_hit_m, rmax, use)
+        if c.do_beamskip and converged:
+            # AMCL: skip beams that most particles cannot explain (likely unmapped obstacles),
+            # unless that would skip too many of them
+            frac = (zs < c.beam_skip_distance_m).mean(axis=0)
+            use = frac >= c.beam_skip_threshold
+            if use.mean() >= 1.0 - c.beam_skip_error_threshold:
+                denom = 2 * c.sigma_hit_m**2
+                pz = c.z_hit * np.exp(-(zs**2) / denom) + c.z_rand / rmax
+                logp = np.log(pz[:, use]).sum(axis=1)
+        return logp, len(ranges)
