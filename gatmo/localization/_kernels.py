@@ -44,6 +44,35 @@ def likelihood_field_kernel(particles, laser_pose, ranges, angles, dist, res, ox
 
 
 @njit(cache=True, parallel=True)
+def likelihood_table_kernel(particles, laser_pose, bx, by, table, res, ox, oy, off_value):
+    """The likelihood field with pz^3 precomputed per cell (``table``) and beam endpoints
+    precomputed in the laser frame (bx, by): p = 1 + sum_k table[cell(endpoint_k)] (N,).
+    Same result as :func:`likelihood_field_kernel` without a trig or exp per beam."""
+    n = particles.shape[0]
+    b = bx.shape[0]
+    h, w = table.shape
+    out = np.empty(n)
+    inv = 1.0 / res
+    for i in prange(n):
+        c = np.cos(particles[i, 2])
+        s = np.sin(particles[i, 2])
+        lx = particles[i, 0] + c * laser_pose[0] - s * laser_pose[1]
+        ly = particles[i, 1] + s * laser_pose[0] + c * laser_pose[1]
+        lc = np.cos(particles[i, 2] + laser_pose[2])
+        ls = np.sin(particles[i, 2] + laser_pose[2])
+        p = 1.0
+        for j in range(b):
+            ix = int(np.floor((lx + lc * bx[j] - ls * by[j] - ox) * inv))
+            iy = int(np.floor((ly + ls * bx[j] + lc * by[j] - oy) * inv))
+            if ix < 0 or iy < 0 or ix >= w or iy >= h:
+                p += off_value
+            else:
+                p += table[iy, ix]
+        out[i] = p
+    return out
+
+
+@njit(cache=True, parallel=True)
 def likelihood_field_prob_kernel(particles, laser_pose, ranges, angles, dist, res, ox, oy,
                                  max_dist, z_hit, z_rand, sigma_hit, range_max, use_beam):
     """log of the product of per-beam likelihoods (N,), beams with use_beam False skipped; also
@@ -107,3 +136,4 @@ def beam_kernel(particles, laser_pose, ranges, angles, cells, res, ox, oy, z_hit
             p += pz * pz * pz
         out[i] = p
     return out
+

@@ -48,7 +48,10 @@ def kld_resample(particles, weights, rng, *, err, z, min_n, max_n):
     rng.shuffle(idx)
     cand = particles[idx]
     keys = bin_keys(cand)
-    _, first = np.unique(keys, axis=0, return_index=True)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+    _, first = np.unique(flat, return_index=True)
     new_bin = np.zeros(len(cand), dtype=np.int64)
     new_bin[first] = 1
     k = np.cumsum(new_bin)  # bins occupied by the first i+1 samples

@@ -71,6 +71,31 @@ class SensorModel:
     def __init__(self, field: LikelihoodField, cfg) -> None:
         self.field = field
         self.cfg = cfg
+        self._table = None
+        self._table_key = None
+
+    def _pz3_table(self, rmax: float):
+        """pz^3 per cell, refreshed (by region) when the field or range_max changes."""
+        c = self.cfg
+        f = self.field
+
+        def pz3(d):
+            return (c.z_hit * np.exp(-(d**2) / (2 * c.sigma_hit_m**2)) + c.z_rand / rmax) ** 3
+
+        key = (rmax, id(f.dist_m), f.dist_m.shape)
+        if self._table is None or self._table_key != key:
+            self._table = pz3(f.dist_m)
+            self._table_version = f.version
+            self._table_key = key
+        elif self._table_version != f.version:
+            missed = f.version - self._table_version
+            if missed > len(f.changed_windows):
+                self._table = pz3(f.dist_m)
+            else:
+                for x0, y0, x1, y1 in f.changed_windows[-missed:]:
+                    self._table[y0:y1, x0:x1] = pz3(f.dist_m[y0:y1, x0:x1])
+            self._table_version = f.version
+        return self._table, float(pz3(np.float64(f.max_dist_m)))
 
     def weigh(self, particles: np.ndarray, scan: Scan, converged: bool) -> tuple[np.ndarray, int]:
         """Log weights (N,) and the number of beams used (0: nothing to weigh)."""
@@ -87,9 +112,10 @@ class SensorModel:
         lp = np.ascontiguousarray(scan.laser_pose_xytheta, dtype=np.float64)
         parts = np.ascontiguousarray(particles, dtype=np.float64)
         if c.laser_model == "likelihood_field":
-            p = K.likelihood_field_kernel(parts, lp, ranges, angles, self.field.dist_m,
-                                          g.resolution_m, ox, oy, self.field.max_dist_m,
-                                          c.z_hit, c.z_rand, c.sigma_hit_m, rmax)
+            table, off = self._pz3_table(rmax)
+            p = K.likelihood_table_kernel(parts, lp, ranges * np.cos(angles),
+                                          ranges * np.sin(angles), table, g.resolution_m, ox,
+                                          oy, off)
             return np.log(p), len(ranges)
         if c.laser_model == "beam":
             p = K.beam_kernel(parts, lp, ranges, angles, g.cells, g.resolution_m, ox, oy,

@@ -28,12 +28,16 @@ class LikelihoodField:
 
     def __init__(self, grid: OccupancyGrid, max_dist_m: float) -> None:
         self.max_dist_m = float(max_dist_m)
+        self.version = 0  # bumped on every change, so derived tables know when to refresh
+        self.changed_windows: list[tuple[int, int, int, int]] = []
         self.set_grid(grid)
 
     def set_grid(self, grid: OccupancyGrid) -> None:
         """Replace the map and recompute the whole field."""
         self.grid = grid
         self.dist_m = distance_field(grid.occupied, grid.resolution_m, self.max_dist_m)
+        self.version += 1
+        self.changed_windows = [(0, 0, grid.width, grid.height)]
 
     def distance_at(self, points_xy: np.ndarray) -> np.ndarray:
         """Distances (N,) [m] at world points (N, 2); off-map points get ``max_dist_m``."""
@@ -66,6 +70,9 @@ class LikelihoodField:
         occ = g.cells[by0:by1, bx0:bx1] == OCCUPIED
         d = distance_field(occ, g.resolution_m, self.max_dist_m)
         self.dist_m[ay0:ay1, ax0:ax1] = d[ay0 - by0 : ay1 - by0, ax0 - bx0 : ax1 - bx0]
+        self.version += 1
+        self.changed_windows.append((ax0, ay0, ax1, ay1))
+        del self.changed_windows[:-64]
         return ax0, ay0, ax1, ay1
 
     def apply_grid_diff(self, new_grid: OccupancyGrid):

@@ -164,3 +164,20 @@ def test_cluster_estimate_picks_heaviest_cluster():
     assert np.hypot(*(mean[:2] - [1, 1])) < 0.02
     assert abs(np.angle(np.exp(1j * (mean[2] - 3.1)))) < 0.01
     assert cov[0, 0] < 0.01 and cov[2, 2] < 0.01
+
+
+def test_table_kernel_equals_direct_kernel_after_region_updates():
+    grid, scan, parts = _world()
+    field = LikelihoodField(grid.copy(), 2.0)
+    cfg = AmclConfig(z_hit=0.9, z_rand=0.1, max_beams=61)
+    model = SensorModel(field, cfg)
+    r, a, rmax = select_beams(scan, 61, None, None, keep_max_range=False)
+    for k in range(3):
+        if k:
+            patch = np.full((10, 12), 100 if k == 1 else 0, dtype=np.int8)
+            field.update_region(patch, 60 + 5 * k, 30)
+        logw, _ = model.weigh(parts, scan, False)
+        direct = K.likelihood_field_kernel(parts, np.zeros(3), r, a, field.dist_m, 0.05, 0.0,
+                                           0.0, 2.0, 0.9, 0.1, 0.2, rmax)
+        np.testing.assert_allclose(logw, np.log(direct), rtol=1e-12)
+
