@@ -29,6 +29,7 @@ def _scenario(tmp: Path):
     cfg.rearrange.move_prob = 0.0
     cfg.rearrange.shift_prob = 0.0
     cfg.rearrange.add_count = 0
+    cfg.rearrange.remove_prob = 0.0
     cfg.people.count_per_run = 0
     cfg.robot.duration_s = 40.0
     scen = simulate_scenario(tmp, preset="office", runs=1, seed=7, config=cfg)

@@ -345,7 +345,6 @@ def run_gatmo(
 ) -> RunSummary:
     """``gatmo run``: the full stack on one log; writes poses.tum, objects.json, map, events."""
     from gatmo.maps.io import load_map
-
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
     out = Path(out_dir)
@@ -434,7 +433,6 @@ def compare(
 ) -> CompareResult:
     """``gatmo compare``: static localizer vs full stack on the same logs, same seeds."""
     from gatmo.maps.io import load_map
-
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
     out = Path(out_dir)

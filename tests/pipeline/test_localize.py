@@ -15,6 +15,7 @@ def test_localize_cli_on_simulated_office(tmp_path, capsys):
     cfg.rearrange.move_prob = 0.0
     cfg.rearrange.shift_prob = 0.0
     cfg.rearrange.add_count = 0
+    cfg.rearrange.remove_prob = 0.0
     scen = simulate_scenario(tmp_path / "s", preset="office", runs=1, seed=1, config=cfg)
     params = tmp_path / "amcl.yaml"
     params.write_text("amcl:\n  ros__parameters:\n    z_hit: 0.95\n    z_rand: 0.05\n"

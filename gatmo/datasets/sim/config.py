@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from pydantic import Field
+from typing import Literal
+
+from pydantic import Field, model_validator
 
 from gatmo.config import GatmoModel
 
@@ -31,16 +33,30 @@ class PeopleConfig(GatmoModel):
     min_speed_mps: float = Field(0.5, gt=0)
     max_speed_mps: float = Field(1.2, gt=0)
 
+    @model_validator(mode="after")
+    def _ordered(self) -> PeopleConfig:
+        if self.min_speed_mps > self.max_speed_mps:
+            raise ValueError("min_speed_mps must be <= max_speed_mps")
+        return self
+
 
 class RearrangeConfig(GatmoModel):
     """Per piece and run: moved elsewhere / shifted and turned in place / removed; plus adds."""
 
     move_prob: float = Field(0.25, ge=0, le=1)
     shift_prob: float = Field(0.2, ge=0, le=1)
-    remove_prob: float = Field(0.0, ge=0, le=1)
+    remove_prob: float = Field(0.05, ge=0, le=1)
     add_count: int = Field(1, ge=0)
-    shift_min_m: float = Field(0.3, ge=0)
+    shift_min_m: float = Field(0.2, ge=0)
     shift_max_m: float = Field(1.0, ge=0)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> RearrangeConfig:
+        if self.move_prob + self.shift_prob + self.remove_prob > 1.0 + 1e-9:
+            raise ValueError("move_prob + shift_prob + remove_prob must be <= 1")
+        if self.shift_min_m > self.shift_max_m:
+            raise ValueError("shift_min_m must be <= shift_max_m")
+        return self
 
 
 class RobotConfig(GatmoModel):
@@ -51,7 +67,9 @@ class RobotConfig(GatmoModel):
 
 
 class SimConfig(GatmoModel):
-    preset: str = "hall"
+    """All simulator parameters; ``for_preset`` gives each world's defaults."""
+
+    preset: Literal["hall", "office"] = "hall"
     laser: LaserConfig = Field(default_factory=LaserConfig)
     odom: OdomConfig = Field(default_factory=OdomConfig)
     people: PeopleConfig = Field(default_factory=PeopleConfig)
@@ -65,7 +83,8 @@ class SimConfig(GatmoModel):
         (walls dominate, 10 m laser)."""
         if name == "office":
             return cls(preset="office", laser=LaserConfig(max_range_m=10.0),
-                       rearrange=RearrangeConfig(move_prob=0.2, shift_prob=0.2))
+                       rearrange=RearrangeConfig(move_prob=0.2, shift_prob=0.2),
+                       robot=RobotConfig(duration_s=90.0))
         if name == "hall":
             return cls(preset="hall")
         from gatmo.errors import ConfigError

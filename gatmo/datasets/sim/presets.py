@@ -18,7 +18,7 @@ def _walls_of(x0, y0, x1, y1, t=0.15) -> list[np.ndarray]:
             _rect(x0 - t, y0, x0, y1), _rect(x1, y0, x1 + t, y1)]
 
 
-def _route_distance(points_xy: np.ndarray, route: np.ndarray) -> np.ndarray:
+def route_distance(points_xy: np.ndarray, route: np.ndarray) -> np.ndarray:
     """Distance (N,) from points to a closed polyline route (K, 2)."""
     a, b = route, np.roll(route, -1, axis=0)
     ab = b - a
@@ -30,7 +30,13 @@ def _route_distance(points_xy: np.ndarray, route: np.ndarray) -> np.ndarray:
 
 def placement_ok(piece: Piece, others: list[Piece], world: World, route: np.ndarray,
                  clearance_m: float = 0.6, gap_m: float = 0.15) -> bool:
-    """Inside a room away from walls, clear of the route and of other pieces (bounding circles)."""
+    """Inside a room away from walls, clear of the route and of other pieces.
+
+    Pieces are compared by bounding circles plus ``gap_m``, a conservative test: two accepted
+    pieces never overlap whatever their yaw. The route polyline keeps ``clearance_m`` [m] free
+    beyond a piece's bounding circle (so the robot, which cuts corners a little, never touches
+    furniture).
+    """
     c = piece.pose_xytheta[:2]
     r = piece.radius_m
     inside = False
@@ -46,7 +52,8 @@ def placement_ok(piece: Piece, others: list[Piece], world: World, route: np.ndar
         nearest = np.clip(c, lo, hi)
         if np.hypot(*(c - nearest)) < r + 0.1:
             return False
-    if _route_distance(c[None], route)[0] < r + clearance_m:
+    d_route = route_distance(c[None], route)[0]
+    if d_route < r + clearance_m:
         return False
     for o in others:
         if o.id != piece.id and np.hypot(*(c - o.pose_xytheta[:2])) < r + o.radius_m + gap_m:
@@ -75,10 +82,14 @@ def random_pose(world: World, rng: np.random.Generator, route: np.ndarray | None
 
 def place(world: World, piece: Piece, route: np.ndarray, rng: np.random.Generator,
           tries: int = 400) -> bool:
+    """Put ``piece`` at a random free pose with a random yaw; False (pose unchanged) if none of
+    ``tries`` candidates fits."""
+    old = piece.pose_xytheta.copy()
     for _ in range(tries):
         piece.pose_xytheta = random_pose(world, rng, route)
         if placement_ok(piece, world.pieces, world, route):
             return True
+    piece.pose_xytheta = old
     return False
 
 
@@ -114,6 +125,7 @@ def make_world(preset: str, rng: np.random.Generator) -> tuple[World, np.ndarray
             xs.append(W)
             for a, b in zip(xs[::2], xs[1::2], strict=True):
                 walls.append(_rect(a, y0, b, y0 + t))
+            world.doors += [_rect(d, y0, d + 1.0, y0 + t) for d in doors]
         walls += [_rect(6.0, 0, 6.15, 4.5), _rect(12.0, 0, 12.15, 4.5), _rect(9.0, 6.5, 9.15, H)]
         world.static_polys = walls
         route = np.array([[1.5, 5.5], [16.5, 5.5], [15.0, 5.5], [15.0, 2.2], [15.0, 5.5],
@@ -129,4 +141,4 @@ def make_world(preset: str, rng: np.random.Generator) -> tuple[World, np.ndarray
     return world, route
 
 
-__all__ = ["box_polygon", "make_world", "place", "placement_ok"]
+__all__ = ["box_polygon", "make_world", "place", "placement_ok", "route_distance"]

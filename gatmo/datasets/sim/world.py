@@ -71,10 +71,18 @@ class World:
     interior: list[np.ndarray]  # polygons of free floor (rooms, corridors)
     static_polys: list[np.ndarray]  # walls and columns
     pieces: list[Piece] = field(default_factory=list)
+    doors: list[np.ndarray] = field(default_factory=list)  # free floor joining rooms
 
     def copy(self) -> World:
         return World(self.bounds_xy, self.interior, self.static_polys,
-                     [Piece(p.id, p.label, p.pose_xytheta.copy()) for p in self.pieces])
+                     [Piece(p.id, p.label, p.pose_xytheta.copy()) for p in self.pieces],
+                     self.doors)
+
+    def piece(self, piece_id: int) -> Piece | None:
+        for p in self.pieces:
+            if p.id == piece_id:
+                return p
+        return None
 
     def segments_and_circles(self, extra_circles: np.ndarray | None = None):
         """All blocking geometry: segments (S, 4) and circles (C, 3) as (x, y, r)."""
@@ -155,7 +163,7 @@ def rasterize(world: World, resolution_m: float = 0.05) -> OccupancyGrid:
         sub = cells[y0:y1, x0:x1]
         sub[inside] = value
 
-    for poly in world.interior:
+    for poly in [*world.interior, *world.doors]:
         fill(poly, FREE)
     for poly in world.static_polys:
         fill(poly, OCCUPIED)
