@@ -1,0 +1,149 @@
+"""``objects.json``: the object map across runs.
+
+Schema (version 1)::
+
+    {"format": "gatmo-objects", "version": 1, "resolution_m": 0.05, "next_id": 23,
+     "base_map": {...},                      # the static map the objects were cut from
+     "objects": [{"id": 3, "label": "lounge_chair", "status": "M",
+                  "pose": [x, y, yaw],       # p_i: object frame -> map frame
+                  "base_pose": [x, y, yaw] | null,   # where the static map draws it
+                  "structure": false,
+                  "shape_cells_xy": [[x, y], ...],   # I_i, object frame [m]
+                  "edge_xy": [[x, y], ...],          # E_i, object frame [m]
+                  "seen_count": 120, "moved_count": 2,
+                  "history": [{"run": 1, "stamp_s": 12.3, "pose": [...], "status": "A"}]}]}
+
+Written atomically (temp file, fsync, rename): an interrupted run never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from gatmo._io import atomic_write_text
+from gatmo.errors import FormatError
+from gatmo.objects.objectmap import STATUSES, MapObject, ObjectMap
+
+FORMAT = "gatmo-objects"
+VERSION = 1
+
+
+def _f(v) -> float:
+    return round(float(v), 6)
+
+
+def save_objects(path: str | Path, object_map: ObjectMap, *, base_grid_meta: dict | None = None):
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        "resolution_m": object_map.resolution_m,
+        "next_id": object_map.next_id,
+        "base_map": base_grid_meta or {},
+        "objects": [
+            {
+                "id": o.id,
+                "label": o.label,
+                "status": o.status,
+                "pose": [_f(v) for v in o.pose_xytheta],
+                "base_pose": None if o.base_pose_xytheta is None
+                else [_f(v) for v in o.base_pose_xytheta],
+                "structure": bool(o.structure),
+                "shape_cells_xy": [[_f(x), _f(y)] for x, y in o.shape_xy],
+                "edge_xy": [[_f(x), _f(y)] for x, y in o.edge_xy],
+                "seen_count": int(o.seen_count),
+                "moved_count": int(o.moved_count),
+                "history": o.history,
+            }
+            for o in object_map.objects
+        ],
+    }
+    return atomic_write_text(path, json.dumps(doc, separators=(",", ":")))
+
+
+def _pose(v, path, where) -> np.ndarray:
+    a = np.asarray(v, dtype=float) if isinstance(v, list) else None
+    if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise FormatError(f"expected [x, y, yaw], got {v!r}", file=path, field=where)
+    return a
+
+
+def _points(v, path, where) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=float).reshape(-1, 2)
+    except (TypeError, ValueError):
+        raise FormatError("expected a list of [x, y]", file=path, field=where) from None
+    if not np.all(np.isfinite(a)):
+        raise FormatError("non-finite coordinate", file=path, field=where)
+    return a
+
+
+def load_objects(path: str | Path) -> ObjectMap:
+    """Read objects.json; any schema problem is a FormatError naming the JSON path."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise FormatError(f"cannot read: {exc.strerror}", file=path) from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise FormatError(f"not JSON: {exc}", file=path) from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise FormatError(f"not a {FORMAT} file", file=path, field="format")
+    if doc.get("version") != VERSION:
+        raise FormatError(f"unsupported version {doc.get('version')!r} (this gatmo reads "
+                          f"{VERSION})", file=path, field="version")
+    try:
+        res = float(doc["resolution_m"])
+        next_id = int(doc["next_id"])
+        items = doc["objects"]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FormatError(f"missing or bad top-level field: {exc}", file=path) from None
+    if not isinstance(items, list) or not (res > 0):
+        raise FormatError("bad objects list or resolution", file=path, field="objects")
+    objects, ids = [], set()
+    for i, d in enumerate(items):
+        where = f"objects[{i}]"
+        if not isinstance(d, dict):
+            raise FormatError("expected an object", file=path, field=where)
+        try:
+            oid = d["id"]
+            if not isinstance(oid, int) or isinstance(oid, bool):
+                raise FormatError(f"id must be an integer, got {oid!r}", file=path,
+                                  field=f"{where}.id")
+            if oid in ids:
+                raise FormatError(f"id {oid} used twice", file=path, field=f"{where}.id")
+            ids.add(oid)
+            status = d["status"]
+            if status not in STATUSES:
+                raise FormatError(f"status must be one of {STATUSES}, got {status!r}",
+                                  file=path, field=f"{where}.status")
+            label = d.get("label")
+            if label is not None and not isinstance(label, str):
+                raise FormatError("label must be a string or null", file=path,
+                                  field=f"{where}.label")
+            bp = d.get("base_pose")
+            hist = d.get("history", [])
+            if not isinstance(hist, list):
+                raise FormatError("history must be a list", file=path, field=f"{where}.history")
+            o = MapObject(
+                id=oid, label=label, status=status,
+                pose_xytheta=_pose(d["pose"], path, f"{where}.pose"),
+                shape_xy=_points(d["shape_cells_xy"], path, f"{where}.shape_cells_xy"),
+                edge_xy=_points(d.get("edge_xy", []), path, f"{where}.edge_xy"),
+                structure=bool(d.get("structure", False)),
+                base_pose_xytheta=None if bp is None else _pose(bp, path, f"{where}.base_pose"),
+                resolution_m=res,
+                seen_count=int(d.get("seen_count", 0)),
+                moved_count=int(d.get("moved_count", 0)),
+                history=hist,
+            )
+        except KeyError as exc:
+            raise FormatError(f"missing field {exc}", file=path, field=where) from None
+        except (TypeError, ValueError) as exc:
+            raise FormatError(f"bad value: {exc}", file=path, field=where) from None
+        objects.append(o)
+    if ids and next_id <= max(ids):
+        next_id = max(ids) + 1
+    return ObjectMap(objects, res, next_id)

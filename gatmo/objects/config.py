@@ -1,0 +1,53 @@
+"""GATMO's parameters, with the paper's names where it has them (Gallagher et al., ICRA 2009)."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from gatmo.config import GatmoModel
+
+
+class GatmoConfig(GatmoModel):
+    """Object map, absence, metaobjects and matching.
+
+    Paper names: ``delta_R_m`` (grid side for the person likelihood integral, eq. P(x|p)),
+    ``delta_W_m`` (width of the neighbourhood N_i around an object's edges), ``beta_thresh``
+    (fraction of an object's cells seen through before it is absent, Alg. 1), ``tau_memory_s``
+    (a metaobject unseen this long is discarded), ``beta_min_prob`` (per-point probability of
+    the new-object hypothesis m_new).
+    """
+
+    delta_R_m: float = Field(0.05, gt=0)
+    delta_W_m: float = Field(0.15, gt=0)
+    beta_thresh: float = Field(0.4, gt=0, lt=1)
+    tau_memory_s: float = Field(4.0, gt=0)
+    beta_min_prob: float = Field(0.02, gt=0, lt=1)
+    # object map
+    wall_min_extent_m: float = Field(2.5, gt=0, description="larger objects are structure")
+    min_object_cells: int = Field(3, ge=1)
+    # absence (Alg. 1), made robust
+    absence_exclude_end_m: float = Field(0.12, ge=0)
+    absence_min_rays: int = Field(6, ge=1)
+    absence_max_range_m: float = Field(6.0, gt=0)
+    hits_clear_fraction: float = Field(0.2, ge=0, le=1)
+    # unexplained returns
+    meanshift_bandwidth_m: float = Field(0.35, gt=0)
+    min_cluster_points: int = Field(3, ge=1)
+    gate_m: float = Field(1.0, gt=0)
+    # person hypothesis (constant-velocity Kalman filter on the centre)
+    person_accel_std: float = Field(1.5, gt=0)
+    person_meas_std_m: float = Field(0.1, gt=0)
+    # chair hypothesis (evidence grid)
+    chair_min_scans: int = Field(6, ge=1)
+    chair_min_cells: int = Field(6, ge=1)
+    chair_max_speed_mps: float = Field(0.15, gt=0)
+    # matching
+    match_min_score: float = Field(0.7, gt=0, le=1)
+    match_min_edge_fraction: float = Field(0.3, ge=0, le=1)
+    match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
+    match_max_free_fraction: float = Field(0.05, ge=0, le=1)
+    match_edge_sigma_m: float = Field(0.05, gt=0)
+    match_search_m: float = Field(0.4, gt=0)
+    match_search_deg: float = Field(12.0, gt=0)
+    lookalike_tolerance: float = Field(0.15, gt=0)
+    add_min_cells: int = Field(10, ge=1)

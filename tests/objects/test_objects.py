@@ -1,0 +1,197 @@
+"""GATMO proper on hand-made worlds with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gatmo.errors import FormatError
+from gatmo.geometry import transform_points
+from gatmo.maps.object_io import load_objects, save_objects
+from gatmo.objects import GatmoConfig, GatmoMapper, ObjectMap
+from gatmo.objects.matching import match_points
+from gatmo.objects.meanshift import mean_shift
+from gatmo.objects.metaobject import Metaobject
+from gatmo.objects.objectmap import shape_from_points
+from tests.helpers import make_scan, room_grid
+
+CFG = GatmoConfig()
+
+
+def test_region_growing_splits_objects_and_walls():
+    g = room_grid(10, 8, 0.05, boxes=[(2, 2, 2.5, 2.5), (5, 5, 6, 5.4), (2.55, 2.0, 2.8, 2.3)])
+    om = ObjectMap.from_grid(g, CFG)
+    sizes = sorted(len(o.shape_xy) for o in om.objects)
+    # walls (one ring), the first box touching the third (8-connected: one object), the bar
+    assert len(om.objects) == 3
+    walls = [o for o in om.objects if o.structure]
+    assert len(walls) == 1 and len(walls[0].shape_xy) == sizes[-1]
+    bar = min(om.objects, key=lambda o: np.hypot(*(o.pose_xytheta[:2] - [5.5, 5.2])))
+    assert len(bar.shape_xy) == 21 * 9  # (6 - 5) / 0.05 + 1 by (5.4 - 5) / 0.05 + 1 cells
+    np.testing.assert_allclose(bar.pose_xytheta[:2], [5.525, 5.225], atol=1e-9)
+    assert len(bar.edge_xy) == 2 * 21 + 2 * 7
+    # rendering the untouched map gives the map back
+    assert om.render(g) == g
+
+
+def test_algorithm1_marks_an_object_absent_when_rays_pass_through():
+    g = room_grid(10, 6, 0.05, boxes=[(5, 2.5, 5.5, 3.0)])
+    world = room_grid(10, 6, 0.05)  # the box is gone
+    m = GatmoMapper.from_config(CFG, g)
+    m.begin_run(1)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    events = []
+    for i, x in enumerate(np.linspace(2.0, 3.0, 6)):
+        s = make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=i)
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=i)
+    assert [e.kind for e in events] == ["absent"] and events[0].object_id == box.id
+    assert box.status == "A"
+    assert not m.grid().occupied[50:60, 100:110].any()  # removed from the map
+    changes = m.pop_map_changes()
+    assert changes and m.pop_map_changes() == []
+
+
+def test_no_absence_while_pose_is_not_confident():
+    g = room_grid(10, 6, 0.05, boxes=[(5, 2.5, 5.5, 3.0)])
+    world = room_grid(10, 6, 0.05)
+    m = GatmoMapper.from_config(CFG, g)
+    m.begin_run(1)
+    for i in range(5):
+        s = make_scan(world, (2.0, 2.75, 0.0), max_range_m=8.0, stamp_s=i)
+        assert m.update(s.gt_pose_xytheta, s, pose_confident=False, stamp_s=i) == []
+
+
+def test_mean_shift_finds_known_clusters():
+    rng = np.random.default_rng(0)
+    a = rng.normal([0, 0], 0.05, (30, 2))
+    b = rng.normal([2, 1], 0.05, (20, 2))
+    centres, labels = mean_shift(np.vstack([a, b]), 0.3)
+    assert len(centres) == 2
+    assert len(set(labels[:30])) == 1 and len(set(labels[30:])) == 1 and labels[0] != labels[-1]
+    np.testing.assert_allclose(sorted(centres.tolist()), [[0, 0], [2, 1]], atol=0.05)
+
+
+def _legs(t):
+    c = np.array([1.0 * t, 0.0])
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    ring = 0.06 * np.stack([np.cos(ang), np.sin(ang)], 1)
+    return np.vstack([c + [0, 0.12] + ring, c - [0, 0.12] + ring])
+
+
+def test_person_hypothesis_wins_for_walking_legs_and_chair_for_a_still_box():
+    walker = Metaobject(1, _legs(0.0), 0.0, CFG, 0.05)
+    for k in range(1, 15):
+        walker.update(_legs(0.1 * k), 0.1 * k)
+    assert walker.dominant() == "person"
+    rng = np.random.default_rng(1)
+    side = np.stack([np.linspace(3, 3.7, 15), np.full(15, 2.0)], 1)
+    chair = Metaobject(2, side, 0.0, CFG, 0.05)
+    for k in range(1, 15):
+        chair.update(side + rng.normal(0, 0.01, side.shape), 0.1 * k)
+    assert chair.dominant() == "chair"
+
+
+@pytest.mark.parametrize(
+    "pts_fn",
+    [
+        lambda: _box(1.4, 0.7),  # desk
+        lambda: _box(0.5, 0.5),  # square box: 4-fold symmetric
+        lambda: _box(1.6, 0.1),  # partition
+        lambda: _l_shape(),  # asymmetric
+    ],
+)
+def test_matching_recovers_known_motion(pts_fn):
+    shape = pts_fn()
+    obj_shape, edge, pose0 = shape_from_points(shape, 0.05)
+    from gatmo.objects.objectmap import MapObject
+
+    obj = MapObject(1, "x", "A", pose0, obj_shape, edge, resolution_m=0.05)
+    true = np.array([pose0[0] + 0.23, pose0[1] - 0.17, 0.35])
+    seen = transform_points(true, edge)  # the chair grid sees the edges at the new pose
+    m = match_points(seen, obj, CFG, prior_yaw=0.35)
+    assert m.score > 0.9
+    # the footprint lands where the truth puts it (symmetric shapes: any equivalent yaw)
+    moved = transform_points(m.pose_xytheta, obj_shape)
+    truth = transform_points(true, obj_shape)
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(truth).query(moved)
+    assert np.mean(d) < 0.03
+    assert np.hypot(*(m.pose_xytheta[:2] - true[:2])) < 0.05
+
+
+def _box(lx, ly):
+    xs, ys = np.meshgrid(np.arange(0, lx, 0.05), np.arange(0, ly, 0.05))
+    return np.stack([xs.ravel(), ys.ravel()], 1) + [3.0, 2.0]
+
+
+def _l_shape():
+    a = _box(1.0, 0.3)
+    b = _box(0.3, 0.8)
+    return np.vstack([a, b])
+
+
+def test_objects_json_round_trip_and_errors(tmp_path):
+    g = room_grid(8, 6, 0.05, boxes=[(2, 2, 2.5, 2.5), (5, 3, 5.4, 4)])
+    om = ObjectMap.from_grid(g, CFG)
+    om.objects[1].status = "M"
+    om.objects[1].label = "box"
+    om.objects[1].pose_xytheta = np.array([3.0, 3.0, 0.5])
+    om.objects[1].record(2, 12.5)
+    save_objects(tmp_path / "o.json", om)
+    back = load_objects(tmp_path / "o.json")
+    assert [o.id for o in back.objects] == [o.id for o in om.objects]
+    for a, b in zip(om.objects, back.objects, strict=True):
+        assert a.status == b.status and a.label == b.label and a.history == b.history
+        np.testing.assert_allclose(a.pose_xytheta, b.pose_xytheta, atol=1e-6)
+        np.testing.assert_allclose(a.shape_xy, b.shape_xy, atol=1e-6)
+    assert back.render(g) == om.render(g)
+    import json
+
+    doc = json.loads((tmp_path / "o.json").read_text())
+    doc["objects"][1]["id"] = doc["objects"][0]["id"]
+    (tmp_path / "dup.json").write_text(json.dumps(doc))
+    with pytest.raises(FormatError) as e:
+        load_objects(tmp_path / "dup.json")
+    assert e.value.field == "objects[1].id"
+    doc["version"] = 99
+    (tmp_path / "v.json").write_text(json.dumps(doc))
+    with pytest.raises(FormatError, match="version"):
+        load_objects(tmp_path / "v.json")
+    (tmp_path / "bad.json").write_text('{"format": "gatmo-objects", "version": 1, '
+                                       '"resolution_m": 0.05, "next_id": 2, "objects": '
+                                       '[{"id": 1, "status": "U", "pose": [1, 2], '
+                                       '"shape_cells_xy": []}]}')
+    with pytest.raises(FormatError) as e:
+        load_objects(tmp_path / "bad.json")
+    assert e.value.field == "objects[0].pose"
+
+
+def test_end_to_end_moved_box_is_relocated_with_its_id():
+    # map: a box at (6, 2); world: the box moved to (3.5, 4.2) and turned; a person walks
+    g = room_grid(10, 6, 0.05, boxes=[(6.0, 2.0, 6.7, 2.7)])
+    om = ObjectMap.from_grid(g, CFG)
+    box = [o for o in om.objects if not o.structure][0]
+    true_new = np.array([3.9, 4.3, 0.4])
+    world = room_grid(10, 6, 0.05)
+    pts = transform_points(true_new, box.shape_xy)
+    c = world.world_to_cell(pts)
+    world.cells[c[:, 1], c[:, 0]] = 100
+    m = GatmoMapper(om, g, CFG)
+    m.begin_run(1)
+    events = []
+    path = [(x, 2.9, 0.0) for x in np.linspace(2.0, 5.0, 40)]
+    path += [(5.0, 2.9, th) for th in np.linspace(0, 2.6, 20)]
+    path += [(5.0 - 0.02 * k, 2.9 + 0.01 * k, 2.6) for k in range(40)]
+    for i, pose in enumerate(path):
+        s = make_scan(world, pose, n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
+    kinds = [e.kind for e in events if e.object_id == box.id]
+    assert kinds[:2] == ["absent", "relocated"], kinds
+    moved = transform_points(box.pose_xytheta, box.shape_xy)
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(pts).query(moved)
+    assert np.mean(d) < 0.05
+    assert np.hypot(*(box.pose_xytheta[:2] - true_new[:2])) < 0.15
+    assert box.status == "M" and box.moved_count == 1 and box.history[-1]["status"] == "M"
