@@ -19,7 +19,7 @@ class GatmoConfig(GatmoModel):
 
     delta_R_m: float = Field(0.05, gt=0)
     delta_W_m: float = Field(0.15, gt=0)
-    beta_thresh: float = Field(0.4, gt=0, lt=1)
+    beta_thresh: float = Field(0.6, gt=0, lt=1)
     tau_memory_s: float = Field(4.0, gt=0)
     beta_min_prob: float = Field(0.02, gt=0, lt=1)
     # object map
@@ -27,8 +27,9 @@ class GatmoConfig(GatmoModel):
     min_object_cells: int = Field(3, ge=1)
     # absence (Alg. 1), made robust
     absence_exclude_end_m: float = Field(0.12, ge=0)
-    absence_min_rays: int = Field(6, ge=1)
+    absence_min_rays: int = Field(20, ge=1)
     absence_max_range_m: float = Field(6.0, gt=0)
+    absence_margin_m: float = Field(0.15, ge=0, description="count only cells this far inside")
     hits_clear_fraction: float = Field(0.2, ge=0, le=1)
     # unexplained returns
     meanshift_bandwidth_m: float = Field(0.35, gt=0)
@@ -42,7 +43,8 @@ class GatmoConfig(GatmoModel):
     chair_min_cells: int = Field(6, ge=1)
     chair_max_speed_mps: float = Field(0.15, gt=0)
     # matching
-    match_min_score: float = Field(0.7, gt=0, le=1)
+    match_min_score: float = Field(0.8, gt=0, le=1)
+    match_patience_scans: int = Field(30, ge=1, description="after this, match despite doubt")
     match_min_edge_fraction: float = Field(0.3, ge=0, le=1)
     match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
     match_max_free_fraction: float = Field(0.05, ge=0, le=1)

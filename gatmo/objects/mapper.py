@@ -74,6 +74,7 @@ class GatmoMapper:
         self._rays: dict[int, int] = {}
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._fields: dict[int, EdgeField] = {}
+        self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0}
         self._ms: list[float] = []
@@ -95,6 +96,25 @@ class GatmoMapper:
         """Region updates (cells_new (h, w), ix0, iy0) since the last call."""
         out, self._pending = self._pending, []
         return out
+
+    def _core(self, o: MapObject) -> set:
+        """Local indices of the cells Alg. 1 counts: those at least ``absence_margin_m`` inside
+        the object's outline, so rays grazing its edge (raster aliasing, pose noise) do not
+        make it absent. Thin objects and outline-only maps fall back to their deepest cells."""
+        core = self._cores.get(o.id)
+        if core is None:
+            res = o.resolution_m
+            idx = np.floor(o.shape_xy / res).astype(np.int64)
+            lo = idx.min(axis=0) - 1
+            mask = np.zeros(tuple(idx.max(axis=0) - lo + 2)[::-1], dtype=bool)
+            mask[idx[:, 1] - lo[1], idx[:, 0] - lo[0]] = True
+            depth = ndimage.distance_transform_edt(mask) * res
+            d = depth[idx[:, 1] - lo[1], idx[:, 0] - lo[0]]
+            keep = d >= self.cfg.absence_margin_m
+            if keep.sum() < 5:
+                keep = d >= d.max()
+            core = self._cores[o.id] = set(np.nonzero(keep)[0].tolist())
+        return core
 
     def _build_owner(self) -> None:
         g = self._grid
@@ -220,7 +240,8 @@ class GatmoMapper:
                 self._seen[o.id].difference_update(hit_loc[hit_own == i].tolist())
         for i in np.unique(own[sel]):
             o = objs[int(i)]
-            frac = len(self._seen.get(o.id, ())) / max(len(o.shape_xy), 1)
+            core = self._core(o)
+            frac = len(self._seen.get(o.id, set()) & core) / max(len(core), 1)
             if frac > c.beta_thresh and self._rays.get(o.id, 0) >= c.absence_min_rays:
                 self._mark_absent(o, stamp_s, events)
 
@@ -285,6 +306,7 @@ class GatmoMapper:
         if len(pts) < self.cfg.chair_min_cells:
             return False
         best = None
+        rivals: list = []
         ext_p = _extents(pts)
         for o in only if only is not None else self._candidates():
             ext_o = _extents(o.shape_xy)
@@ -296,12 +318,28 @@ class GatmoMapper:
             if mt.score < self.cfg.match_min_score or not self._free_consistent(o, mt):
                 continue
             dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
-            key = (round(mt.score, 2), -dist)  # look-alikes: prefer the nearest absent one
+            key = (round(mt.score * 20) / 20, -dist)  # look-alikes: prefer the nearest one
+            rivals.append((key, o, mt))
             if best is None or key > best[0]:
                 best = (key, o, mt)
         if best is None:
             return False
         _, o, mt = best
+        patient = m.n_obs < self.cfg.match_patience_scans
+        if patient and only is None:
+            # a different-looking candidate nearly as good: wait for more of the object
+            for k2, o2, _ in rivals:
+                if o2 is not o and k2[0] >= best[0][0] - 0.05 and not lookalike(
+                        o2, o, self.cfg.lookalike_tolerance):
+                    return False
+            # a placed look-alike right here is more likely the one that moved a little
+            c = pts.mean(axis=0)
+            if np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > 1.0:
+                for u in self.object_map.placed():
+                    if (not u.structure and u is not o
+                            and np.hypot(*(u.pose_xytheta[:2] - c)) < 1.0 + u.extent_m() / 2
+                            and lookalike(u, o, self.cfg.lookalike_tolerance)):
+                        return False
         self._relocate(o, mt, stamp_s, events)
         m.matched_object = o.id
         return True

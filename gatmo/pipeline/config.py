@@ -54,6 +54,18 @@ def load_stack_config(config_path: str | Path | None = None, params_path: str | 
     return cfg
 
 
+def sim_stack_config():
+    """The stack config the demo uses on simulated halls: AMCL's laser weights as in ROS 1
+    (z_hit 0.95, z_rand 0.05) and odometry noise matched to the simulator's."""
+    cfg = stack_config_class()()
+    a = cfg.amcl
+    for k, v in dict(z_hit=0.95, z_rand=0.05, alpha1=0.05, alpha2=0.05, alpha3=0.05,
+                     alpha4=0.05, update_min_d_m=0.1, update_min_a_rad=0.1, min_particles=500,
+                     max_particles=3000).items():
+        setattr(a, k, v)
+    return cfg
+
+
 def dump_stack_config(cfg) -> str:
     return dump_model(cfg)
 

@@ -430,6 +430,8 @@ def compare(
     scenario_json: str | Path | None = None,
     progress: Progress | None = None,
     keep_traces: bool = False,
+    config=None,
+    sides: Sequence[str] = SIDES,
 ) -> CompareResult:
     """``gatmo compare``: static localizer vs full stack on the same logs, same seeds."""
     from gatmo.maps.io import load_map
@@ -441,7 +443,7 @@ def compare(
         raise GatmoError(
             f"{len(gt_paths)} ground-truth files for {len(logs)} logs", field="--ground-truth"
         )
-    cfg = load_stack_config(config_path, params_path)
+    cfg = config if config is not None else load_stack_config(config_path, params_path)
     atomic_write_text(out / "config.yaml", dump_stack_config(cfg))
     base = load_map(map_yaml)
     meta = _base_meta(Path(map_yaml), base)
@@ -452,6 +454,13 @@ def compare(
         relations = read_relations(relations_path)
 
     mapper = _make_mapper(cfg, base, None)
+    scenario, ties = None, {}
+    if scenario_json is not None:
+        from gatmo.datasets.sim import load_scenario
+        from gatmo.pipeline.evaluate import tie_objects
+
+        scenario = load_scenario(scenario_json)
+        ties = tie_objects(mapper.object_map, scenario)
     rows: list = []
     pics: list = []
     traces: dict = {}
@@ -485,6 +494,13 @@ def compare(
         for t in (t_static, t_gatmo):
             row = score(t, gt, relations)
             row["run"] = k + 1
+            if scenario is not None and t.side == "gatmo":
+                from gatmo.pipeline.evaluate import score_run
+
+                run_no = _run_number(log, k + 1)
+                if run_no <= len(scenario["runs"]):
+                    o = score_run(mapper.object_map, ties, scenario, run_no, t.events)
+                    row.update({f"obj_{key}": v for key, v in o.items() if key != "run"})
             rows.append(row)
         if pictures:
             from gatmo.pipeline.plots import plot_log
@@ -501,6 +517,13 @@ def compare(
             out / "summary.json", json.dumps(result.as_dict(), indent=2, default=_json_default)
         )
     return CompareResult(out, rows, _overall(rows), pics, traces)
+
+
+def _run_number(log, default: int) -> int:
+    import re
+
+    m = re.search(r"run_(\d+)", Path(log).name)
+    return int(m.group(1)) if m else default
 
 
 def _offset(progress: Progress | None, offset: int) -> Progress | None:
@@ -531,6 +554,8 @@ def demo(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: int 
     from gatmo.datasets.sim import simulate_scenario
 
     out = Path(out_dir)
+    from gatmo.pipeline.config import sim_stack_config
+
     scen = simulate_scenario(out / "scenario", preset=preset, runs=runs, seed=seed)
     return compare(
         scen.map_yaml,
@@ -538,4 +563,5 @@ def demo(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: int 
         out / "compare",
         scenario_json=scen.scenario_json,
         progress=progress,
+        config=sim_stack_config(),
     )

@@ -35,15 +35,19 @@ class FusionConfig(GatmoModel):
 
     The localizer is *confident* when it ran a sensor update on this scan, its heaviest cluster
     has position standard deviations below ``reset_max_std_xy_m`` and heading standard deviation
-    below ``reset_max_std_theta_deg``. GATMO's absence test runs only while the pose is confident
-    and the last reset is at most ``confident_for_m`` of travel old.
+    below ``reset_max_std_theta_deg``: the matcher's offset is then reset. GATMO lays scans onto
+    the object map only under the stricter ``absence_max_std_*`` (or within ``confident_for_m``
+    of travel after a reset): a wrong pose sees through everything.
     """
 
     use_scan_matcher: bool = True
     reset_max_std_xy_m: float = 0.15
     reset_max_std_theta_deg: float = 5.0
-    confident_for_m: float = 2.0
-    max_offset_jump_m: float = 1.0
+    absence_max_std_xy_m: float = 0.1
+    absence_max_std_theta_deg: float = 3.0
+    confident_for_m: float = 0.0
+    max_offset_jump_m: float = 0.5
+    offset_gain: float = 1.0
 
 
 @dataclass
@@ -118,8 +122,16 @@ class LocalizationStack:
             match = self.matcher.register(scan)
             T_match_base = np.asarray(match.pose_xytheta, dtype=float)
             if self.T_map_match is None or confident:
-                # the paper's reset: the matcher's frame is re-anchored on the filter's estimate
-                self.T_map_match = compose(loc_pose, inverse(T_match_base))
+                # the paper's reset: the matcher's frame is re-anchored on the filter's estimate;
+                # offset_gain < 1 moves it only part of the way (a complementary filter: the
+                # matcher's precise increments average the filter's jitter out)
+                target = compose(loc_pose, inverse(T_match_base))
+                g = 1.0 if self.T_map_match is None else self.fusion.offset_gain
+                if g >= 1.0:
+                    self.T_map_match = target
+                else:
+                    d = relative(self.T_map_match, target)
+                    self.T_map_match = compose(self.T_map_match, d * g)
                 reset = True
                 why = "confident" if confident else "start"
                 self.resets.append((float(scan.stamp_s), why, loc_pose.copy()))
@@ -144,7 +156,10 @@ class LocalizationStack:
         events: list = []
         changed = False
         if self.mapper is not None:
-            pose_ok = confident or self._travel_since_reset_m <= self.fusion.confident_for_m
+            strict = FusionConfig(reset_max_std_xy_m=self.fusion.absence_max_std_xy_m,
+                                  reset_max_std_theta_deg=self.fusion.absence_max_std_theta_deg)
+            pose_ok = is_confident(est, strict) or (
+                confident and self._travel_since_reset_m <= self.fusion.confident_for_m)
             events = self.mapper.update(pose, scan, pose_confident=pose_ok, stamp_s=scan.stamp_s)
             for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
                 self.localizer.update_map_region(cells_new, ix0, iy0)

@@ -43,9 +43,9 @@ class PeopleConfig(GatmoModel):
 class RearrangeConfig(GatmoModel):
     """Per piece and run: moved elsewhere / shifted and turned in place / removed; plus adds."""
 
-    move_prob: float = Field(0.25, ge=0, le=1)
-    shift_prob: float = Field(0.2, ge=0, le=1)
-    remove_prob: float = Field(0.05, ge=0, le=1)
+    move_prob: float = Field(0.15, ge=0, le=1)
+    shift_prob: float = Field(0.15, ge=0, le=1)
+    remove_prob: float = Field(0.03, ge=0, le=1)
     add_count: int = Field(1, ge=0)
     shift_min_m: float = Field(0.2, ge=0)
     shift_max_m: float = Field(1.0, ge=0)

@@ -1,0 +1,140 @@
+"""Scoring GATMO's object map against a simulated scenario's truth (scenario.json).
+
+Map objects are tied to the scenario's pieces once, by footprint overlap in the static map
+(layout L0): that gives each object its label (as a user labelling the map would) and its true
+pose in every later layout. An object is *correctly placed* when its footprint at the
+estimated pose lies on the piece's true footprint (mean distance < 0.1 m, centre < 0.15 m):
+footprints, not yaw, so symmetric pieces are not penalised for an equivalent yaw.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gatmo.geometry import compose, inverse, transform_points
+
+
+def _piece_points(piece: dict, res: float) -> np.ndarray:
+    """Filled footprint points (K, 2) of a scenario piece in its own frame."""
+    kind = piece["shape"]["kind"]
+    dims = piece["shape"]["dims_m"]
+    if kind == "circle":
+        r = dims[0]
+        xs = np.arange(-r, r + 1e-9, res / 2)
+        gx, gy = np.meshgrid(xs, xs)
+        pts = np.stack([gx.ravel(), gy.ravel()], 1)
+        return pts[np.hypot(pts[:, 0], pts[:, 1]) <= r]
+    lx, ly = dims[0], dims[1]
+    gx, gy = np.meshgrid(np.arange(-lx / 2, lx / 2 + 1e-9, res / 2),
+                         np.arange(-ly / 2, ly / 2 + 1e-9, res / 2))
+    return np.stack([gx.ravel(), gy.ravel()], 1)
+
+
+def tie_objects(object_map, scenario: dict) -> dict[int, int]:
+    """object id -> piece id by footprint overlap in layout L0; sets the objects' labels."""
+    res = scenario.get("resolution_m", 0.05)
+    ties: dict[int, int] = {}
+    pieces = scenario["map_objects"]
+    trees = [(p, cKDTree(transform_points(np.array(p["pose"]), _piece_points(p, res))))
+             for p in pieces]
+    for o in object_map.objects:
+        if o.structure or o.base_pose_xytheta is None:
+            continue
+        pts = o.cells_world(o.base_pose_xytheta)
+        best, best_n = None, 0
+        for p, tree in trees:
+            d, _ = tree.query(pts, distance_upper_bound=res)
+            n = int(np.isfinite(d).sum())
+            if n > best_n:
+                best, best_n = p, n
+        if best is not None and best_n >= 0.5 * len(pts):
+            ties[o.id] = best["id"]
+            if o.label is None:
+                o.label = best["label"]
+    return ties
+
+
+def true_pose_of(piece_id: int, layout: list[dict]) -> np.ndarray | None:
+    for p in layout:
+        if p["id"] == piece_id:
+            return np.array(p["pose"], dtype=float)
+    return None
+
+
+def placement_error(o, expected_pose: np.ndarray) -> tuple[float, float]:
+    """(mean footprint distance, centre distance) [m] of the object vs its expected pose."""
+    est = o.cells_world()
+    ref = o.cells_world(expected_pose)
+    d, _ = cKDTree(ref).query(est)
+    return float(np.mean(d)), float(np.hypot(*(est.mean(0) - ref.mean(0))))
+
+
+def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
+              events: list[dict]) -> dict:
+    """Object figures after run ``run`` (1-based).
+
+    moved: tied pieces that moved in this run (moved/shifted); found: those whose object ends
+    the run correctly placed with its id; absent_recall: moved or removed tied pieces whose
+    object was taken off its old place (absent or relocated); false_relocations: relocation
+    events this run that left an object in the wrong place; false_absences: absent events
+    for objects whose piece did not change this run; persons_added: new objects where only
+    people walked (never allowed).
+    """
+    r = scenario["runs"][run - 1]
+    layout0 = scenario["map_objects"]
+    layout = r["objects"]
+    changed = {c["id"]: c["kind"] for c in r["changes"]}
+    by_id = object_map.by_id
+    piece_to_obj = {v: k for k, v in ties.items()}
+    moved = [pid for pid, kind in changed.items() if kind in ("moved", "shifted")
+             and pid in piece_to_obj]
+    found = 0
+    errors = []
+    for pid in moved:
+        o = by_id[piece_to_obj[pid]]
+        exp = expected_pose(o, pid, layout0, layout)
+        if exp is None:
+            continue
+        mean_d, centre_d = placement_error(o, exp)
+        if o.status in ("M", "U") and mean_d < 0.1 and centre_d < 0.15:
+            found += 1
+            errors.append(centre_d)
+    gone = [pid for pid, kind in changed.items() if kind in ("moved", "shifted", "removed")
+            and pid in piece_to_obj]
+    off = sum(1 for pid in gone if by_id[piece_to_obj[pid]].status == "A"
+              or any(e.get("object_id") == piece_to_obj[pid] and e.get("kind") == "relocated"
+                     for e in events))
+    false_reloc = 0
+    for e in events:
+        if e.get("kind") != "relocated" or e.get("object_id") not in ties:
+            continue
+        o = by_id[e["object_id"]]
+        exp = expected_pose(o, ties[o.id], layout0, layout)
+        pose_then = np.asarray(e["pose_new"], dtype=float)
+        if exp is None:
+            false_reloc += 1
+            continue
+        ref = o.cells_world(exp)
+        est = o.cells_world(pose_then)
+        d, _ = cKDTree(ref).query(est)
+        if float(np.mean(d)) >= 0.1:
+            false_reloc += 1
+    false_abs = sum(1 for e in events if e.get("kind") == "absent"
+                    and e.get("object_id") in ties and ties[e["object_id"]] not in changed)
+    return {
+        "run": run, "moved": len(moved), "found": found,
+        "found_fraction": found / len(moved) if moved else float("nan"),
+        "placement_error_m": float(np.mean(errors)) if errors else float("nan"),
+        "gone": len(gone), "absent_recall": off / len(gone) if gone else float("nan"),
+        "false_relocations": false_reloc, "false_absences": false_abs,
+    }
+
+
+def expected_pose(o, piece_id: int, layout0: list[dict], layout: list[dict]):
+    """Where the object's frame must be if it followed its piece from L0 to this layout."""
+    p0 = true_pose_of(piece_id, layout0)
+    pk = true_pose_of(piece_id, layout)
+    if p0 is None or pk is None or o.base_pose_xytheta is None:
+        return None
+    return compose(pk, compose(inverse(p0), o.base_pose_xytheta))
