@@ -30,6 +30,11 @@ class GatmoConfig(GatmoModel):
     absence_min_rays: int = Field(20, ge=1)
     absence_max_range_m: float = Field(6.0, gt=0)
     absence_margin_m: float = Field(0.15, ge=0, description="count only cells this far inside")
+    absence_min_beams: int = Field(4, ge=1, description="beams expected on it for a vote")
+    absence_beyond_m: float = Field(0.4, gt=0, description="a return this far beyond = gone")
+    absence_min_votes: int = Field(3, ge=1, description="scans voting gone before absent")
+    min_explained_fraction: float = Field(0.5, ge=0, le=1,
+                                          description="returns the map explains, else skip")
     hits_clear_fraction: float = Field(0.2, ge=0, le=1)
     # unexplained returns
     meanshift_bandwidth_m: float = Field(0.35, gt=0)

@@ -18,7 +18,7 @@ from gatmo.datasets.types import Scan
 from gatmo.geometry import compose, transform_points, wrap_angle
 from gatmo.maps.grid import OccupancyGrid
 from gatmo.maps.likelihood import LikelihoodField
-from gatmo.maps.raycast import traverse_rays
+from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
 from gatmo.objects.matching import EdgeField, lookalike, match_points
 from gatmo.objects.meanshift import mean_shift
@@ -73,6 +73,7 @@ class GatmoMapper:
         self._seen: dict[int, set] = {}
         self._rays: dict[int, int] = {}
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
+        self._beam_votes: dict[int, list[int]] = {}  # id -> [scans voting gone, present]
         self._fields: dict[int, EdgeField] = {}
         self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
@@ -150,6 +151,7 @@ class GatmoMapper:
         self._seen = {}
         self._rays = {}
         self._free[:] = 0
+        self._beam_votes = {}
 
     def end_run(self) -> list[Event]:
         """Dominant chairs seen this run and never matched become new objects (in M)."""
@@ -190,8 +192,14 @@ class GatmoMapper:
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
         valid = scan.valid
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
+        far = self._explain.distance_at(pts) > self.cfg.delta_W_m
+        if len(pts) and 1.0 - far.mean() < self.cfg.min_explained_fraction:
+            # most returns off the map: the pose is wrong however confident the filter is
+            self.counts["skipped_poor_fit"] = self.counts.get("skipped_poor_fit", 0) + 1
+            self._expire(stamp_s, events)
+            return events
         self._absence(lp, scan, valid, pts, stamp_s, events)
-        unexplained = pts[self._explain.distance_at(pts) > self.cfg.delta_W_m]
+        unexplained = pts[far]
         self._track(unexplained, stamp_s, events)
         self._expire(stamp_s, events)
         self._ms.append((time.perf_counter() - t0) * 1e3)
@@ -223,6 +231,8 @@ class GatmoMapper:
         own = self._owner[cells[:, 1], cells[:, 0]]
         hit_cells = g.world_to_cell(pts)
         okh = g.in_bounds(hit_cells)
+        # a return is stronger evidence than rays passing: cells with returns are not free
+        self._free[hit_cells[okh, 1], hit_cells[okh, 0]] = 0
         hit_own = self._owner[hit_cells[okh, 1], hit_cells[okh, 0]]
         hit_loc = self._local[hit_cells[okh, 1], hit_cells[okh, 0]]
         sel = own >= 0
@@ -238,16 +248,52 @@ class GatmoMapper:
             o.seen_count += 1
             if o.id in self._seen:  # returns on the object: those cells are there
                 self._seen[o.id].difference_update(hit_loc[hit_own == i].tolist())
+        votes = self._vote_beams(lp, scan)
+        gone = []
         for i in np.unique(own[sel]):
             o = objs[int(i)]
             core = self._core(o)
             frac = len(self._seen.get(o.id, set()) & core) / max(len(core), 1)
             if frac > c.beta_thresh and self._rays.get(o.id, 0) >= c.absence_min_rays:
+                v = votes.get(o.id, [0, 0])
+                if v[0] >= c.absence_min_votes and v[0] > 2 * v[1]:
+                    gone.append(o)
+        for o in gone:  # after the loop: marking re-renders and may re-index the objects
+            if o.status in ("U", "M"):
                 self._mark_absent(o, stamp_s, events)
+
+    def _vote_beams(self, lp, scan) -> dict[int, list[int]]:
+        """Beyond Alg. 1, robust to pose errors of a cell or two: per scan, the beams the map
+        says should end on an object either pass well beyond it (a vote for gone) or end near
+        it (a vote for present). Returns the run's votes per object id."""
+        c = self.cfg
+        g = self._grid
+        expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
+        r = np.where(np.isfinite(scan.ranges_m), scan.ranges_m, scan.range_max_m)
+        hit = expected < scan.range_max_m
+        ends = lp[:2] + (expected[:, None] + g.resolution_m / 2) * np.stack(
+            [np.cos(lp[2] + scan.angles_rad), np.sin(lp[2] + scan.angles_rad)], axis=1)
+        cells = g.world_to_cell(ends)
+        ok = hit & g.in_bounds(cells)
+        own = np.full(len(r), -1)
+        own[ok] = self._owner[cells[ok, 1], cells[ok, 0]]
+        objs = self.object_map.objects
+        for i in np.unique(own[own >= 0]):
+            m = own == i
+            if m.sum() < c.absence_min_beams:
+                continue
+            through = np.mean(r[m] > expected[m] + c.absence_beyond_m)
+            v = self._beam_votes.setdefault(objs[int(i)].id, [0, 0])
+            if through >= 0.7:
+                v[0] += 1
+            elif through <= 0.3:
+                v[1] += 1
+        return self._beam_votes
 
     def _mark_absent(self, o: MapObject, stamp_s, events) -> None:
         o.status = "A"
         o.record(self.run, stamp_s)
+        self._beam_votes.pop(o.id, None)
         self._seen.pop(o.id, None)
         self._rays.pop(o.id, None)
         events.append(Event(float(stamp_s), self.run, "absent", o.id, o.label,

@@ -77,9 +77,7 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     moved: tied pieces that moved in this run (moved/shifted); found: those whose object ends
     the run correctly placed with its id; absent_recall: moved or removed tied pieces whose
     object was taken off its old place (absent or relocated); false_relocations: relocation
-    events this run that left an object in the wrong place; false_absences: absent events
-    for objects whose piece did not change this run; persons_added: new objects where only
-    people walked (never allowed).
+    events this run that left an object in the wrong place.
     """
     r = scenario["runs"][run - 1]
     layout0 = scenario["map_objects"]
@@ -120,14 +118,32 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
         d, _ = cKDTree(ref).query(est)
         if float(np.mean(d)) >= 0.1:
             false_reloc += 1
-    false_abs = sum(1 for e in events if e.get("kind") == "absent"
-                    and e.get("object_id") in ties and ties[e["object_id"]] not in changed)
+    false_abs = 0
+    for e in events:
+        if e.get("kind") != "absent" or e.get("object_id") not in ties:
+            continue
+        o = by_id[e["object_id"]]
+        exp = expected_pose(o, ties[o.id], layout0, layout)
+        if exp is not None and e.get("pose_old") is not None:
+            d, _ = cKDTree(o.cells_world(exp)).query(o.cells_world(np.asarray(e["pose_old"])))
+            false_abs += int(np.mean(d) < 0.1)  # the piece was still where the map had it
+    correct = total = 0
+    for oid, pid in ties.items():
+        o = by_id.get(oid)
+        exp = expected_pose(o, pid, layout0, layout) if o is not None else None
+        total += 1
+        if exp is None:
+            correct += int(o is not None and o.status in ("A", "Gamma"))  # removed: absent
+            continue
+        mean_d, _ = placement_error(o, exp)
+        correct += int(o.status in ("U", "M") and mean_d < 0.1)
     return {
         "run": run, "moved": len(moved), "found": found,
         "found_fraction": found / len(moved) if moved else float("nan"),
         "placement_error_m": float(np.mean(errors)) if errors else float("nan"),
         "gone": len(gone), "absent_recall": off / len(gone) if gone else float("nan"),
         "false_relocations": false_reloc, "false_absences": false_abs,
+        "map_correct_fraction": correct / total if total else float("nan"),
     }
 
 

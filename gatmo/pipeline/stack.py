@@ -48,6 +48,59 @@ class FusionConfig(GatmoModel):
     confident_for_m: float = 0.0
     max_offset_jump_m: float = 0.5
     offset_gain: float = 1.0
+    align_to_map: bool = True
+    align_min_fitness: float = 0.6
+    align_max_correction_m: float = 0.15
+    align_max_correction_deg: float = 5.0
+
+
+@dataclass
+class MapAligner:
+    """Scan-to-map ICP around a pose: the precise pose GATMO needs, and a check of it.
+
+    The localizer's covariance says how tight its particles are, not whether they are right;
+    a filter that locked onto the wrong place is confident too. Aligning the scan with the
+    current map's edges (converged, small correction, most points matched) is a direct test.
+    """
+
+    def __init__(self, fusion: FusionConfig):
+        self.fusion = fusion
+        self._grid_id = None
+        self._tree = None
+        self._pts = None
+        self._normals = None
+
+    def set_grid(self, grid: OccupancyGrid) -> None:
+        from scipy import ndimage
+        from scipy.spatial import cKDTree
+
+        from gatmo.scanmatch.icp import normals_of
+
+        occ = grid.occupied
+        edge = occ & ~ndimage.binary_erosion(occ, border_value=0)
+        iy, ix = np.nonzero(edge)
+        self._pts = grid.cell_to_world(np.stack([ix, iy], axis=1))
+        self._tree = cKDTree(self._pts) if len(self._pts) >= 10 else None
+        if self._tree is not None:
+            self._normals, _ = normals_of(self._pts, self._tree)
+
+    def refine(self, pose_xytheta: np.ndarray, scan: Scan) -> tuple[np.ndarray, bool]:
+        """(refined base pose, trustworthy) for a scan near ``pose_xytheta``."""
+        from gatmo.scanmatch.icp import icp_2d, voxel_downsample
+
+        if self._tree is None:
+            return pose_xytheta, False
+        pts = voxel_downsample(scan.points_base_xy(), 0.05)
+        if len(pts) < 20:
+            return pose_xytheta, False
+        f = self.fusion
+        res = icp_2d(pts, self._pts, pose_xytheta, target_tree=self._tree,
+                     target_normals=self._normals, max_corr_dist_m=0.3, max_iter=15)
+        corr = relative(pose_xytheta, res.T_target_source)
+        ok = (res.converged and not res.degenerate and res.fitness >= f.align_min_fitness
+              and np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
+              and abs(corr[2]) <= np.radians(f.align_max_correction_deg))
+        return (res.T_target_source if ok else pose_xytheta), bool(ok)
 
 
 @dataclass
@@ -101,6 +154,7 @@ class LocalizationStack:
         self.resets: list[tuple[float, str, np.ndarray]] = []  # (stamp_s, why, pose)
         self.n_scans = 0
         self.n_map_updates = 0
+        self._aligner: MapAligner | None = None
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -160,11 +214,20 @@ class LocalizationStack:
                                   reset_max_std_theta_deg=self.fusion.absence_max_std_theta_deg)
             pose_ok = is_confident(est, strict) or (
                 confident and self._travel_since_reset_m <= self.fusion.confident_for_m)
-            events = self.mapper.update(pose, scan, pose_confident=pose_ok, stamp_s=scan.stamp_s)
+            map_pose = pose
+            if pose_ok and self.fusion.align_to_map:
+                if self._aligner is None:
+                    self._aligner = MapAligner(self.fusion)
+                    self._aligner.set_grid(self.mapper.grid())
+                map_pose, pose_ok = self._aligner.refine(pose, scan)
+            events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
+                                        stamp_s=scan.stamp_s)
             for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
                 self.localizer.update_map_region(cells_new, ix0, iy0)
                 changed = True
                 self.n_map_updates += 1
+            if changed and self._aligner is not None:
+                self._aligner.set_grid(self.mapper.grid())
         self.n_scans += 1
         return StackStep(
             stamp_s=float(scan.stamp_s),
@@ -186,6 +249,7 @@ class LocalizationStack:
         for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
             self.localizer.update_map_region(cells_new, ix0, iy0)
             self.n_map_updates += 1
+        self._aligner = None  # rebuilt from the new map on first use
         return events
 
     def current_grid(self, base: OccupancyGrid) -> OccupancyGrid:
