@@ -379,3 +379,15 @@ def test_simulate_run_in_memory():
     scans = simulate_run(world, route, short_cfg("office", 2.0), rng)
     assert len(scans) == 20 and all(s.gt_pose_xytheta is not None for s in scans)
     assert np.allclose(np.diff([s.stamp_s for s in scans]), 0.1)
+
+
+def test_odometry_of_a_robot_standing_still_does_not_spin():
+    # heading pi: atan2(0, 0) - pi used to wrap to a 2 pi turn that the rotation scale bias
+    # turned into a spurious spin (0.06 rad per scan)
+    from gatmo.datasets.sim.config import OdomConfig
+    from gatmo.datasets.sim.robot import sample_odometry
+
+    true = np.tile([16.5, 7.0, np.pi], (50, 1))
+    od = sample_odometry(true, OdomConfig(), np.random.default_rng(0), scale_bias=(1.02, 1.03))
+    assert np.max(np.abs(np.angle(np.exp(1j * od[:, 2])))) < 1e-9
+    assert np.max(np.abs(od[:, :2])) < 1e-9

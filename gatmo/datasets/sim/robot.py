@@ -95,8 +95,18 @@ def sample_odometry(true_xytheta: np.ndarray, cfg: OdomConfig, rng: np.random.Ge
     # below 1 cm the direction of travel is ill-defined: the decomposition stays exact, but the
     # noise is sized as for a pure turn (AMCL makes the same choice when it samples)
     moving = trans > 0.01
+    # standing still, atan2(0, 0) gives rot1 = -theta and rot1 + rot2 may wrap to -2 pi, which
+    # the rotation scale bias then turns into a spurious spin: decompose as a pure turn
+    still = trans < 1e-9
+    rot1 = np.where(still, 0.0, rot1)
+    rot2 = np.where(still, wrap_angle(d[:, 2]), rot2)
     n1 = np.where(moving, rot1, 0.0)
     n2 = np.where(moving, rot2, wrap_angle(d[:, 2]))
+    # driving backwards is rot1 = pi, not a half turn: size the noise on the angle to the
+    # nearer of forward and backward (AMCL's delta_rot_noise), or reversing would throw the
+    # odometry heading by tens of degrees
+    n1 = np.minimum(np.abs(n1), np.abs(wrap_angle(n1 - np.pi)))
+    n2 = np.where(moving, np.minimum(np.abs(n2), np.abs(wrap_angle(n2 - np.pi))), n2)
     sd1 = np.sqrt(a.alpha1 * n1**2 + a.alpha2 * trans**2)
     sdt = np.sqrt(a.alpha3 * trans**2 + a.alpha4 * (n1**2 + n2**2))
     sd2 = np.sqrt(a.alpha1 * n2**2 + a.alpha2 * trans**2)

@@ -1,0 +1,99 @@
+"""The comparison over many simulated seeds (issues 5 and 6): static localizer vs the full stack
+on rearranged halls and offices, the full stack in the same world before anything moved, and
+GATMO's object figures. Seeds are 100.. (never used while tuning, which used seed 3).
+
+    python -m benchmarks.bench_gatmo_sim [--seeds 10] [--preset hall] [--runs 4]
+
+Writes bench-out/gatmo_sim_<preset>.json and prints one line per seed and the totals.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path("bench-out")
+
+
+def one_seed(seed: int, preset: str, runs: int, tmp: Path) -> dict:
+    from gatmo.datasets.sim import SimConfig, simulate_scenario
+    from gatmo.pipeline.config import sim_stack_config
+    from gatmo.pipeline.runs import compare
+
+    scen = simulate_scenario(tmp / f"s{seed}", preset=preset, runs=runs, seed=seed)
+    t0 = time.perf_counter()
+    res = compare(scen.map_yaml, scen.logs, tmp / f"c{seed}", scenario_json=scen.scenario_json,
+                  config=sim_stack_config(), pictures=False)
+    secs = time.perf_counter() - t0
+    # the same world before anything moved: same seed, no rearrangement
+    still = SimConfig.for_preset(preset)
+    r = still.rearrange
+    r.move_prob = r.shift_prob = r.remove_prob = 0.0
+    r.add_count = 0
+    base = simulate_scenario(tmp / f"b{seed}", preset=preset, runs=runs, seed=seed,
+                             config=still)
+    before = compare(base.map_yaml, base.logs, tmp / f"d{seed}", config=sim_stack_config(),
+                     pictures=False)
+    g = [x for x in res.rows if x["side"] == "gatmo"]
+    out = {
+        "seed": seed,
+        "static_ate_m": res.overall["static"]["ate_rmse_m"],
+        "gatmo_ate_m": res.overall["gatmo"]["ate_rmse_m"],
+        "before_ate_m": before.overall["gatmo"]["ate_rmse_m"],
+        "static_lost": res.overall["static"]["lost_fraction"],
+        "gatmo_lost": res.overall["gatmo"]["lost_fraction"],
+        "moved": sum(x.get("obj_moved", 0) for x in g),
+        "found": sum(x.get("obj_found", 0) for x in g),
+        "absent_events": sum(x.get("absent", 0) for x in g),
+        "false_relocations": sum(x.get("obj_false_relocations", 0) for x in g),
+        "false_absences": sum(x.get("obj_false_absences", 0) for x in g),
+        "map_correct_last": g[-1].get("obj_map_correct_fraction", float("nan")),
+        "gatmo_ms_per_scan": res.overall["gatmo"]["ms_per_scan"],
+        "static_ms_per_scan": res.overall["static"]["ms_per_scan"],
+        "compare_s": secs,
+    }
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--first-seed", type=int, default=100)
+    ap.add_argument("--preset", default="hall")
+    ap.add_argument("--runs", type=int, default=4)
+    args = ap.parse_args(argv or [])
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            row = one_seed(seed, args.preset, args.runs, Path(tmp))
+            rows.append(row)
+            print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
+                           for k, v in row.items()), flush=True)
+    a = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0]}
+    total = {
+        "preset": args.preset, "seeds": len(rows),
+        "gatmo_over_static_ate_median": float(np.median(a["gatmo_ate_m"] / a["static_ate_m"])),
+        "gatmo_over_before_ate_median": float(np.median(a["gatmo_ate_m"] / a["before_ate_m"])),
+        "seeds_gatmo_not_worse": int(np.sum(a["gatmo_ate_m"] <= a["static_ate_m"] * 1.05)),
+        "static_lost_mean": float(a["static_lost"].mean()),
+        "gatmo_lost_mean": float(a["gatmo_lost"].mean()),
+        "found_over_moved": float(a["found"].sum() / max(a["moved"].sum(), 1)),
+        "false_relocations_per_run": float(a["false_relocations"].sum() / (len(rows) * args.runs)),
+        "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * args.runs)),
+        "gatmo_ms_per_scan": float(a["gatmo_ms_per_scan"].mean()),
+        "static_ms_per_scan": float(a["static_ms_per_scan"].mean()),
+    }
+    print(json.dumps(total, indent=1))
+    OUT.mkdir(exist_ok=True)
+    (OUT / f"gatmo_sim_{args.preset}.json").write_text(json.dumps({"rows": rows,
+                                                                   "total": total}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(__import__("sys").argv[1:]))
