@@ -48,6 +48,7 @@ class FusionConfig(GatmoModel):
     confident_for_m: float = 0.0
     max_offset_jump_m: float = 0.5
     offset_gain: float = 1.0
+    max_travel_without_reset_m: float = 1.0
     align_to_map: bool = True
     align_min_fitness: float = 0.6
     align_max_correction_m: float = 0.15
@@ -193,13 +194,16 @@ class LocalizationStack:
                     self._travel_since_reset_m = 0.0
             pose = compose(self.T_map_match, T_match_base)
             # A fused pose far from the localizer means the matcher diverged (e.g. people filled
-            # the scan): fall back to the localizer.
+            # the scan), and an offset not confirmed for a while has drifted with the matcher:
+            # fall back to the localizer.
             gap = relative(pose, loc_pose)
-            if np.hypot(gap[0], gap[1]) > self.fusion.max_offset_jump_m:
+            stale = self._travel_since_reset_m > self.fusion.max_travel_without_reset_m
+            if np.hypot(gap[0], gap[1]) > self.fusion.max_offset_jump_m or stale:
                 self.T_map_match = compose(loc_pose, inverse(T_match_base))
                 pose = loc_pose
                 reset = True
-                self.resets.append((float(scan.stamp_s), "diverged", loc_pose.copy()))
+                if not stale:  # stale fallbacks repeat every scan: not logged
+                    self.resets.append((float(scan.stamp_s), "diverged", loc_pose.copy()))
         elif confident:
             self._travel_since_reset_m = 0.0
         if self._last_pose is not None:

@@ -70,18 +70,17 @@ def test_offset_reset_makes_matcher_pose_land_on_map_frame():
     n = len(truth)
     loc = ScriptedLocalizer(truth, confident_at=[5], bias=(0.3, 0.0, 0.0))
     matcher = DriftingMatcher(truth, T_match_map=(10.0, -4.0, 1.0))
-    stack = LocalizationStack(loc, matcher, None, FusionConfig())
+    stack = LocalizationStack(loc, matcher, None, FusionConfig(max_travel_without_reset_m=100))
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(n)]
-    # before the first confident update the stack follows the (biased) localizer via the offset
-    # set on the first scan; from scan 5 on the offset equals the localizer's confident estimate,
+    # before the first confident update the stack publishes the (biased) localizer; from scan 5 on the offset equals the localizer's confident estimate,
     # so every later pose is truth + the bias seen at the reset, carried exactly by the matcher.
     for i in range(5, n):
         expected = compose(compose(truth[5] + [0.3, 0, 0], relative(truth[5], truth[5])),
                            relative(truth[5], truth[i]))
         np.testing.assert_allclose(out[i].pose_xytheta, expected, atol=1e-9)
     resets = [i for i, o in enumerate(out) if o.reset]
-    assert resets == [0, 5]
+    assert resets == [0, 1, 2, 3, 4, 5]  # before any confident update: the localizer's pose
     assert [r[1] for r in stack.resets] == ["start", "confident"]
 
 
@@ -89,7 +88,7 @@ def test_unconfident_localizer_never_moves_the_offset():
     truth = _truth()
     loc = ScriptedLocalizer(truth, confident_at=[0])
     matcher = DriftingMatcher(truth, T_match_map=(0.0, 0.0, 0.0))
-    stack = LocalizationStack(loc, matcher, None, FusionConfig())
+    stack = LocalizationStack(loc, matcher, None, FusionConfig(max_travel_without_reset_m=100))
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(len(truth))]
     err = np.hypot(*(np.array([o.pose_xytheta for o in out])[:, :2] - truth[:, :2]).T)
@@ -107,7 +106,8 @@ def test_diverged_matcher_falls_back_to_localizer():
                 m.pose_xytheta = m.pose_xytheta + np.array([5.0, 0.0, 0.0])
             return m
 
-    stack = LocalizationStack(loc, Jumpy(truth, (0, 0, 0)), None, FusionConfig())
+    stack = LocalizationStack(loc, Jumpy(truth, (0, 0, 0)), None,
+                              FusionConfig(max_travel_without_reset_m=100))
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(len(truth))]
     assert np.hypot(*(out[11].pose_xytheta[:2] - truth[11][:2])) < 1e-9
@@ -121,3 +121,16 @@ def test_is_confident_thresholds():
     assert not is_confident(Est(np.zeros(3), np.diag([0.0, 0.0, np.radians(2.1) ** 2])), f)
     assert not is_confident(Est(np.zeros(3), np.eye(3) * 1e-6, updated=False), f)
     assert not is_confident(Est(np.zeros(3), np.full((3, 3), np.nan)), f)
+
+
+def test_offset_not_confirmed_for_a_while_falls_back_to_the_localizer():
+    truth = _truth()
+    loc = ScriptedLocalizer(truth, confident_at=[0], bias=(0.2, 0.0, 0.0))
+    matcher = DriftingMatcher(truth, T_match_map=(0.0, 0.0, 0.0))
+    stack = LocalizationStack(loc, matcher, None, FusionConfig(max_travel_without_reset_m=1.0))
+    stack.begin_run(1)
+    out = [stack.step(s) for s in _scans(len(truth))]
+    travel = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(truth[:, :2], axis=0).T))])
+    late = np.nonzero(travel > 1.2)[0]
+    for i in late:  # beyond 1 m without a confident update: the localizer's own pose
+        np.testing.assert_allclose(out[i].pose_xytheta, truth[i] + [0.2, 0, 0], atol=1e-9)
