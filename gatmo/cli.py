@@ -22,7 +22,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-map_app = typer.Typer(help="Build occupancy maps.", no_args_is_help=True)
+map_app = typer.Typer(help="Make occupancy maps.", no_args_is_help=True)
 config_app = typer.Typer(help="Show or write configuration files.", no_args_is_help=True)
 app.add_typer(map_app, name="map")
 app.add_typer(config_app, name="config")
@@ -339,23 +339,21 @@ def config_dump(
     sys.stdout.write(dump_model(cfg))
 
 
-# ---------------------------------------------------------------------- map build
-@map_app.command("build")
-def map_build(
-    log: Annotated[Path, typer.Argument(help="Log or bag with scans and odometry.")],
+# --------------------------------------------------------------------- map render
+@map_app.command("render")
+def map_render(
+    log: Annotated[Path, typer.Argument(help="Log with reference poses (e.g. *-corrected.log).")],
     out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it).")],
-    poses_out: Annotated[
-        Path | None, typer.Option("--poses-out", help="Optimized poses (TUM).")
-    ] = None,
+    resolution: Annotated[float, typer.Option(help="Cell size [m].")] = 0.05,
+    max_range: Annotated[float, typer.Option(help="Use returns up to this range [m].")] = 20.0,
     fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
 ) -> None:
-    """Build a map from raw odometry and scans: ICP odometry, loop closures, gtsam pose graph."""
-    from gatmo.pipeline.mapbuild import run_map_build
+    """Render an occupancy map from a log whose poses are known (log-odds, map_server output)."""
+    from gatmo.pipeline.mapping import render_reference_map
 
-    bar, update = _progress("map build")
-    with bar:
-        summary = run_map_build(log, out, poses_out=poses_out, fmt=fmt, progress=update)
-    _print_mapping("map build", summary.as_dict())
+    summary = render_reference_map(log, out, resolution_m=resolution, max_range_m=max_range,
+                                   fmt=fmt)
+    _print_mapping("map render", summary.as_dict())
 
 
 # ---------------------------------------------------------------------- entry point
@@ -374,7 +372,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         from rich.markup import escape
 
-        _console(stderr=True).print(f"[bold red]error:[/bold red] [red]{escape(str(exc))}[/red]")
+        _console(stderr=True).print(
+            f"[bold red]error:[/bold red] [red]{escape(str(exc))}[/red]", soft_wrap=True
+        )
         return 1
     return 0
 

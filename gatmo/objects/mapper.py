@@ -74,6 +74,7 @@ class GatmoMapper:
         self._rays: dict[int, int] = {}
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._beam_votes: dict[int, list[int]] = {}  # id -> [scans voting gone, present]
+        self._present_this_run: set[int] = set()  # ids with returns on them this run
         self._fields: dict[int, EdgeField] = {}
         self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
@@ -152,6 +153,7 @@ class GatmoMapper:
         self._rays = {}
         self._free[:] = 0
         self._beam_votes = {}
+        self._present_this_run = set()
 
     def end_run(self) -> list[Event]:
         """Dominant chairs seen this run and never matched become new objects (in M)."""
@@ -246,6 +248,7 @@ class GatmoMapper:
         for i in np.unique(hit_own[hit_own >= 0]):
             o = objs[int(i)]
             o.seen_count += 1
+            self._present_this_run.add(o.id)
             if o.id in self._seen:  # returns on the object: those cells are there
                 self._seen[o.id].difference_update(hit_loc[hit_own == i].tolist())
         votes = self._vote_beams(lp, scan)
@@ -378,12 +381,15 @@ class GatmoMapper:
                 if o2 is not o and k2[0] >= best[0][0] - 0.05 and not lookalike(
                         o2, o, self.cfg.lookalike_tolerance):
                     return False
-            # a placed look-alike right here is more likely the one that moved a little
+            # identity among look-alikes: a placed look-alike nearer to what is seen than the
+            # absent candidate, and not seen in its place this run, may be the one that moved
             c = pts.mean(axis=0)
-            if np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > 1.0:
+            d_cand = np.hypot(*(c - o.pose_xytheta[:2]))
+            if d_cand > 1.0:
                 for u in self.object_map.placed():
                     if (not u.structure and u is not o
-                            and np.hypot(*(u.pose_xytheta[:2] - c)) < 1.0 + u.extent_m() / 2
+                            and u.id not in self._present_this_run
+                            and np.hypot(*(u.pose_xytheta[:2] - c)) < d_cand
                             and lookalike(u, o, self.cfg.lookalike_tolerance)):
                         return False
         self._relocate(o, mt, stamp_s, events)

@@ -114,11 +114,14 @@ def _closest_symmetric_yaw(obj, field, points_xy, pose, prior_yaw, score) -> flo
     return best
 
 
+LOOKALIKE_MIN_CELLS = 20
+
+
 def lookalike(a: MapObject, b: MapObject, tol: float) -> bool:
     """Same size and proportions (cell count and principal extents within ``tol``)."""
     na, nb = len(a.shape_xy), len(b.shape_xy)
-    if na == 0 or nb == 0 or abs(na - nb) > tol * max(na, nb):
-        return False
+    if min(na, nb) < LOOKALIKE_MIN_CELLS or abs(na - nb) > tol * max(na, nb):
+        return False  # specks of clutter all look alike: too small to call a shape
     ea = np.sort(np.linalg.eigvalsh(np.cov(a.shape_xy.T)))
     eb = np.sort(np.linalg.eigvalsh(np.cov(b.shape_xy.T)))
     return bool(np.all(np.abs(np.sqrt(ea) - np.sqrt(eb)) <= tol * np.sqrt(np.maximum(ea, eb))

@@ -99,9 +99,11 @@ def icp_2d(source_xy: np.ndarray, target_xy: np.ndarray, init_xytheta=(0.0, 0.0,
     sigma2 = max(rmse**2, 1e-6)
     ev = np.linalg.eigvalsh(H) if n_in else np.zeros(3)
     degenerate = bool(n_in < 6 or ev[0] < degenerate_ratio * max(ev[-1], 1e-12))
-    try:
-        cov = sigma2 * np.linalg.inv(H + np.eye(3) * 1e-9)
-    except np.linalg.LinAlgError:
-        cov = np.eye(3) * 1e6
+    cov = np.eye(3) * 1e6
+    if np.all(np.isfinite(H)):
+        try:
+            cov = sigma2 * np.linalg.inv(H + np.eye(3) * 1e-9)
+        except np.linalg.LinAlgError:
+            pass
     return IcpResult(T, cov, n_in / max(len(source_xy), 1), rmse, n_in, it, converged,
                      degenerate)

@@ -73,8 +73,9 @@ def test_offset_reset_makes_matcher_pose_land_on_map_frame():
     stack = LocalizationStack(loc, matcher, None, FusionConfig(max_travel_without_reset_m=100))
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(n)]
-    # before the first confident update the stack publishes the (biased) localizer; from scan 5 on the offset equals the localizer's confident estimate,
-    # so every later pose is truth + the bias seen at the reset, carried exactly by the matcher.
+    # before the first confident update the stack publishes the (biased) localizer; from scan
+    # 5 on the offset equals the localizer's confident estimate, so every later pose is
+    # truth + the bias seen at the reset, carried exactly by the matcher.
     for i in range(5, n):
         expected = compose(compose(truth[5] + [0.3, 0, 0], relative(truth[5], truth[5])),
                            relative(truth[5], truth[i]))

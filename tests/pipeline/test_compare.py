@@ -1,0 +1,93 @@
+"""``gatmo compare`` and ``gatmo run`` end to end on a small simulated scenario, and bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gatmo.cli import main
+from gatmo.datasets.sim import SimConfig, simulate_scenario
+from gatmo.maps.io import load_map
+from gatmo.maps.object_io import load_objects
+
+
+@pytest.fixture(scope="module")
+def scen(tmp_path_factory):
+    cfg = SimConfig.for_preset("hall")
+    cfg.robot.duration_s = 20.0
+    return simulate_scenario(tmp_path_factory.mktemp("s"), runs=2, seed=5, config=cfg)
+
+
+def test_compare_writes_summary_pictures_and_both_sides(scen, tmp_path, capsys):
+    out = tmp_path / "cmp"
+    rc = main(["compare", *map(str, scen.logs), "--map", str(scen.map_yaml), "--out", str(out),
+               "--scenario", str(scen.scenario_json)])
+    assert rc == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert {r["side"] for r in s["logs"]} == {"static", "gatmo"} and len(s["logs"]) == 4
+    for r in s["logs"]:
+        assert r["ate_rmse_m"] < 5.0 and 0 <= r["lost_fraction"] <= 1
+    assert all(p.endswith(".png") for p in s["pictures"]) and len(s["pictures"]) == 6
+    for p in s["pictures"]:
+        assert (tmp_path / p).exists() or __import__("pathlib").Path(p).exists()
+    objs = load_objects(out / "gatmo" / "02_run_2" / "objects.json")
+    assert len(objs.objects) > 5
+    assert load_map(out / "gatmo" / "02_run_2" / "map.yaml").cells.shape == \
+        load_map(scen.map_yaml).cells.shape
+    assert "static localizer vs gatmo" in capsys.readouterr().out
+
+
+def test_run_writes_poses_objects_map_events_and_continues_from_objects(scen, tmp_path):
+    out1 = tmp_path / "r1"
+    assert main(["run", "--map", str(scen.map_yaml), "--log", str(scen.logs[0]),
+                 "--out", str(out1)]) == 0
+    for name in ("poses.tum", "objects.json", "map.yaml", "map.pgm", "events.jsonl",
+                 "config.yaml"):
+        assert (out1 / name).exists(), name
+    out2 = tmp_path / "r2"
+    assert main(["run", "--map", str(scen.map_yaml), "--log", str(scen.logs[1]),
+                 "--objects", str(out1 / "objects.json"), "--out", str(out2)]) == 0
+    before = {o.id for o in load_objects(out1 / "objects.json").objects}
+    after = {o.id for o in load_objects(out2 / "objects.json").objects}
+    assert before <= after  # identities carried over
+
+
+def test_unreadable_log_in_the_middle_keeps_earlier_results(scen, tmp_path, capsys):
+    bad = tmp_path / "broken.clf"
+    bad.write_text("FLASER 3 1.0 2.0\n")
+    out = tmp_path / "cmp"
+    rc = main(["compare", str(scen.logs[0]), str(bad), "--map", str(scen.map_yaml),
+               "--out", str(out)])
+    assert rc == 1
+    err = capsys.readouterr().err
+    assert "broken.clf" in err and "Traceback" not in err
+    s = json.loads((out / "summary.json").read_text())
+    assert len(s["logs"]) == 2  # the first log's two sides are kept
+
+
+def test_ground_truth_that_does_not_match_is_refused(scen, tmp_path, capsys):
+    gt = tmp_path / "gt.tum"
+    gt.write_text("1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n")
+    rc = main(["compare", str(scen.logs[0]), "--map", str(scen.map_yaml), "--out",
+               str(tmp_path / "c"), "--ground-truth", str(gt)])
+    assert rc == 1 and "gt.tum" in capsys.readouterr().err
+
+
+def test_log_that_does_not_overlap_the_map_is_refused(scen, tmp_path, capsys):
+    rc = main(["compare", str(scen.logs[0]), "--map", str(scen.map_yaml), "--out",
+               str(tmp_path / "c"), "--initial-pose", "500,500,0"])
+    assert rc == 1
+    err = capsys.readouterr().err
+    assert "does not overlap the map" in err or "outside the map" in err
+
+
+def test_map_render_from_known_poses(scen, tmp_path):
+    out = tmp_path / "m.yaml"
+    assert main(["map", "render", str(scen.logs[0]), "--out", str(out)]) == 0
+    m = load_map(out)
+    truth = load_map(scen.map_yaml)
+    occ = m.occupied_cells_world()
+    assert len(occ) > 100
+    assert np.mean(truth.value_at(occ) != 0) > 0.6  # mostly on mapped or moved things
