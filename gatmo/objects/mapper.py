@@ -381,15 +381,12 @@ class GatmoMapper:
                 if o2 is not o and k2[0] >= best[0][0] - 0.05 and not lookalike(
                         o2, o, self.cfg.lookalike_tolerance):
                     return False
-            # identity among look-alikes: a placed look-alike nearer to what is seen than the
-            # absent candidate, and not seen in its place this run, may be the one that moved
+            # a placed look-alike right here is more likely the one that moved a little
             c = pts.mean(axis=0)
-            d_cand = np.hypot(*(c - o.pose_xytheta[:2]))
-            if d_cand > 1.0:
+            if np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > 1.0:
                 for u in self.object_map.placed():
                     if (not u.structure and u is not o
-                            and u.id not in self._present_this_run
-                            and np.hypot(*(u.pose_xytheta[:2] - c)) < d_cand
+                            and np.hypot(*(u.pose_xytheta[:2] - c)) < 1.0 + u.extent_m() / 2
                             and lookalike(u, o, self.cfg.lookalike_tolerance)):
                         return False
         self._relocate(o, mt, stamp_s, events)

@@ -1,0 +1,94 @@
+"""Where chains run: ``local`` (process pool, spawn) or ``ray`` (Ray tasks).
+
+Both take chains of jobs (see :func:`gatmo.batch.spec.expand_jobs`) and return one result dict
+per job. Job errors never escape a task (they are recorded as ``failed``), so Ray's
+``max_retries`` only ever re-runs tasks whose worker died; ``retry_exceptions=False``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+from gatmo.batch.jobs import run_chain, run_job
+from gatmo.batch.spec import Job
+
+Progress = Callable[[int, int], None] | None
+RAY_MAX_RETRIES = 3
+
+
+def run_local(chains: list[list[Job]], out_root: str, stack_cfgs: dict, *,
+              workers: int | None = None, progress: Progress = None) -> list[dict]:
+    """Chains in parallel on a spawn-context process pool, each chain sequential in one task.
+    ``workers`` defaults to ``os.cpu_count()``; 1 worker runs in this process."""
+    total = sum(len(c) for c in chains)
+    results: list[dict] = []
+    workers = workers or os.cpu_count() or 1
+    if workers == 1 or len(chains) <= 1:
+        for ch in chains:
+            results.extend(run_chain(ch, out_root, None, stack_cfgs))
+            if progress is not None:
+                progress(len(results), total)
+        return results
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(workers, len(chains)), mp_context=ctx) as pool:
+        futs = [pool.submit(run_chain, ch, out_root, None,
+                            {j.point_hash: stack_cfgs.get(j.point_hash) for j in ch})
+                for ch in chains]
+        for f in as_completed(futs):
+            results.extend(f.result())
+            if progress is not None:
+                progress(len(results), total)
+    return results
+
+
+def run_ray(chains: list[list[Job]], out_root: str, stack_cfgs: dict, map_bundles: dict, *,
+            address: str | None = None, workers: int | None = None,
+            progress: Progress = None) -> list[dict]:
+    """One Ray task per job. A chain is a sequence of task dependencies: task K receives task
+    K-1's result ObjectRef (Ray waits for it and passes the value). Maps and parameter points
+    are ``ray.put`` once and shared by every job that uses them. ``address`` goes to
+    ``ray.init`` (None: a local instance with ``num_cpus=workers``); an already initialised
+    Ray (e.g. a test's) is used as is."""
+    from gatmo.errors import require
+
+    ray = require("ray", "ray")
+    started = False
+    if not ray.is_initialized():
+        kw = {"include_dashboard": False, "log_to_driver": False}
+        if address is None:
+            kw["num_cpus"] = workers or os.cpu_count() or 1
+        ray.init(address=address, **kw)
+        started = True
+    try:
+        task = ray.remote(max_retries=RAY_MAX_RETRIES, retry_exceptions=False)(_ray_job)
+        map_refs = {name: ray.put(b) for name, b in map_bundles.items()}
+        cfg_refs = {h: ray.put(c) for h, c in stack_cfgs.items()}
+        refs = []
+        for ch in chains:
+            prev = None
+            for job in ch:
+                prev = task.remote(job, out_root, map_refs.get(job.map_name),
+                                   cfg_refs.get(job.point_hash), prev)
+                refs.append(prev)
+        total = len(refs)
+        results: list[dict] = []
+        pending = list(refs)
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            results.extend(ray.get(ready))
+            if progress is not None:
+                progress(len(results), total)
+        return results
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _ray_job(job: Job, out_root: str, bundle, stack_cfg, prev):
+    return run_job(job, out_root, map_bundle_=bundle, stack_cfg=stack_cfg, prev=prev)
+
+
+__all__ = ["run_local", "run_ray"]
