@@ -11,8 +11,9 @@ import multiprocessing as mp
 import os
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 
-from gatmo.batch.jobs import run_chain, run_job
+from gatmo.batch.jobs import _result, finished_result, run_chain, run_job
 from gatmo.batch.spec import Job
 
 Progress = Callable[[int, int], None] | None
@@ -34,14 +35,28 @@ def run_local(chains: list[list[Job]], out_root: str, stack_cfgs: dict, *,
         return results
     ctx = mp.get_context("spawn")
     with ProcessPoolExecutor(max_workers=min(workers, len(chains)), mp_context=ctx) as pool:
-        futs = [pool.submit(run_chain, ch, out_root, None,
-                            {j.point_hash: stack_cfgs.get(j.point_hash) for j in ch})
-                for ch in chains]
+        futs = {pool.submit(run_chain, ch, out_root, None,
+                            {j.point_hash: stack_cfgs.get(j.point_hash) for j in ch}): ch
+                for ch in chains}
         for f in as_completed(futs):
-            results.extend(f.result())
+            try:
+                results.extend(f.result())
+            except BrokenProcessPool as exc:  # a worker died (OOM, kill): record, go on
+                results.extend(_lost(futs[f], out_root, exc))
             if progress is not None:
                 progress(len(results), total)
     return results
+
+
+def _lost(chain: list[Job], out_root: str, exc: Exception) -> list[dict]:
+    """Results of a chain whose worker process died: finished jobs keep their checkpoint, the
+    others are failed (no DONE.json, so the next run of the batch redoes them)."""
+    out = []
+    for job in chain:
+        r = finished_result(job, out_root)
+        out.append(r if r is not None else _result(
+            job, "failed", error=f"WorkerLost: {type(exc).__name__}: worker process died"))
+    return out
 
 
 def run_ray(chains: list[list[Job]], out_root: str, stack_cfgs: dict, map_bundles: dict, *,

@@ -3,8 +3,8 @@ expanded into a list of :class:`Job` grouped into dependency chains.
 
 A job is a pure function of (command, map, log(s), parameter point, seed); its id is a stable
 hash of exactly those, and its folder is readable:
-``<command>/<site-or-log-stem>/<param-hash>/seed<k>`` (chained ``run`` jobs of a ``site`` add
-``/<log-stem>`` so that the runs of one chain sit side by side).
+``<command>/<site-or-log-stem>/<param-hash>/seed<k>`` (jobs of one log under a ``site`` add
+``/<log-stem>``, so that the runs of a site sit side by side).
 """
 
 from __future__ import annotations
@@ -182,7 +182,10 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
                                    for k, f in enumerate(files)])
                 else:
                     for f in files:
-                        chains.append([job([f], entry.site or Path(f).stem)])
+                        if entry.site is not None:  # several logs per site: one folder each
+                            chains.append([job([f], entry.site, sub=Path(f).stem)])
+                        else:
+                            chains.append([job([f], Path(f).stem)])
     seen: dict[str, str] = {}
     for ch in chains:
         for j in ch:

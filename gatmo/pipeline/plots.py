@@ -82,11 +82,13 @@ def plot_log(out_dir: Path, base: OccupancyGrid, grid_before: OccupancyGrid, map
         fig, ax = plt.subplots(figsize=(9, 3.2), constrained_layout=True)
         for tr, colour in ((t_static, "tab:red"), (t_gatmo, "tab:blue")):
             e = error_series(tr, gt)
-            ax.plot(tr.stamps_s - tr.stamps_s[0], e, color=colour, lw=0.9, label=tr.side)
+            ax.plot(tr.stamps_s - tr.stamps_s[0], np.maximum(e, 0.01), color=colour, lw=0.9,
+                    label=tr.side)
         ax.axhline(0.5, color="gray", ls=":", lw=0.8, label="lost (0.5 m)")
         ax.set_xlabel("time [s]")
         ax.set_ylabel("position error [m]")
-        ax.set_yscale("symlog", linthresh=0.1)
+        ax.set_yscale("log")
+        ax.set_ylim(0.01, None)
         ax.legend(fontsize=8)
         ax.set_title(f"run {run}: localization error against ground truth", fontsize=9)
         p = out_dir / "error.png"
