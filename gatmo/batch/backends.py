@@ -34,7 +34,11 @@ def run_local(chains: list[list[Job]], out_root: str, stack_cfgs: dict, *,
                 progress(len(results), total)
         return results
     ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(workers, len(chains)), mp_context=ctx) as pool:
+    n = min(workers, len(chains))
+    # processes replace numba's threads: share the cores instead of oversubscribing them
+    threads = max(1, (os.cpu_count() or 1) // n)
+    with ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_init_worker,
+                             initargs=(threads,)) as pool:
         futs = {pool.submit(run_chain, ch, out_root, None,
                             {j.point_hash: stack_cfgs.get(j.point_hash) for j in ch}): ch
                 for ch in chains}
@@ -102,7 +106,19 @@ def run_ray(chains: list[list[Job]], out_root: str, stack_cfgs: dict, map_bundle
             ray.shutdown()
 
 
+def _init_worker(threads: int) -> None:
+    """Spawned pool worker: cap numba's thread pool before numba is first imported."""
+    os.environ["NUMBA_NUM_THREADS"] = str(threads)
+
+
 def _ray_job(job: Job, out_root: str, bundle, stack_cfg, prev):
+    # a Ray task holds one CPU: numba's parallel kernels get one thread in it
+    try:
+        import numba
+
+        numba.set_num_threads(1)
+    except ImportError:  # pragma: no cover - numba is a core dependency
+        pass
     return run_job(job, out_root, map_bundle_=bundle, stack_cfg=stack_cfg, prev=prev)
 
 

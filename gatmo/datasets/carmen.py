@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from gatmo._io import atomic_write_bytes
-from gatmo.datasets.types import ReadStats, Scan
+from gatmo.datasets.types import ReadStats, Scan, sensor_info
 from gatmo.errors import DataError, FormatError
 from gatmo.geometry import interpolate_poses, relative
 
@@ -224,11 +224,7 @@ class CarmenLog:
         self.stats = stats
 
     def sensor_info(self) -> dict:
-        for scan in self:
-            return {"beams": scan.num_beams,
-                    "fov_deg": float(np.degrees(scan.angles_rad[-1] - scan.angles_rad[0])),
-                    "max_range_m": scan.range_max_m}
-        return {}
+        return sensor_info(self)
 
 
 class _Interp:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gatmo.datasets.types import ReadStats, Scan
+from gatmo.datasets.types import ReadStats, Scan, sensor_info
 from gatmo.errors import DataError, FormatError
 from gatmo.geometry import interpolate_poses
 
@@ -161,11 +161,7 @@ class RosBag:
         self.stats = stats
 
     def sensor_info(self) -> dict:
-        for scan in self:
-            return {"beams": scan.num_beams,
-                    "fov_deg": float(np.degrees(scan.angles_rad[-1] - scan.angles_rad[0])),
-                    "max_range_m": scan.range_max_m}
-        return {}
+        return sensor_info(self)
 
 
 def write_ros2_bag(path: str | Path, scans: Iterable[Scan], *, scan_topic: str = "/scan",

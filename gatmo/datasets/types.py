@@ -98,3 +98,12 @@ class ScanSource(Protocol):
     stats: ReadStats
 
     def __iter__(self) -> Iterator[Scan]: ...
+
+
+def sensor_info(source) -> dict:
+    """Beams, field of view and maximum range of a source's first scan ({} when empty)."""
+    for scan in source:
+        return {"beams": scan.num_beams,
+                "fov_deg": float(np.degrees(scan.angles_rad[-1] - scan.angles_rad[0])),
+                "max_range_m": scan.range_max_m}
+    return {}

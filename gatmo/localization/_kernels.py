@@ -9,6 +9,16 @@ from numba import njit, prange
 from gatmo.maps._kernels import _cast_one
 
 
+@njit(cache=True, inline="always")
+def _laser_in_map(particles, i, laser_pose):
+    """Pose (x, y, theta) of the laser of particle i in the map frame."""
+    c = np.cos(particles[i, 2])
+    s = np.sin(particles[i, 2])
+    return (particles[i, 0] + c * laser_pose[0] - s * laser_pose[1],
+            particles[i, 1] + s * laser_pose[0] + c * laser_pose[1],
+            particles[i, 2] + laser_pose[2])
+
+
 @njit(cache=True, parallel=True)
 def likelihood_field_kernel(particles, laser_pose, ranges, angles, dist, res, ox, oy, max_dist,
                             z_hit, z_rand, sigma_hit, range_max):
@@ -20,11 +30,7 @@ def likelihood_field_kernel(particles, laser_pose, ranges, angles, dist, res, ox
     rand = z_rand / range_max
     out = np.empty(n)
     for i in prange(n):
-        c = np.cos(particles[i, 2])
-        s = np.sin(particles[i, 2])
-        lx = particles[i, 0] + c * laser_pose[0] - s * laser_pose[1]
-        ly = particles[i, 1] + s * laser_pose[0] + c * laser_pose[1]
-        lt = particles[i, 2] + laser_pose[2]
+        lx, ly, lt = _laser_in_map(particles, i, laser_pose)
         p = 1.0
         for j in range(b):
             r = ranges[j]
@@ -54,12 +60,9 @@ def likelihood_table_kernel(particles, laser_pose, bx, by, table, res, ox, oy, o
     out = np.empty(n)
     inv = 1.0 / res
     for i in prange(n):
-        c = np.cos(particles[i, 2])
-        s = np.sin(particles[i, 2])
-        lx = particles[i, 0] + c * laser_pose[0] - s * laser_pose[1]
-        ly = particles[i, 1] + s * laser_pose[0] + c * laser_pose[1]
-        lc = np.cos(particles[i, 2] + laser_pose[2])
-        ls = np.sin(particles[i, 2] + laser_pose[2])
+        lx, ly, lt = _laser_in_map(particles, i, laser_pose)
+        lc = np.cos(lt)
+        ls = np.sin(lt)
         p = 1.0
         for j in range(b):
             ix = int(np.floor((lx + lc * bx[j] - ls * by[j] - ox) * inv))
@@ -85,11 +88,7 @@ def likelihood_field_prob_kernel(particles, laser_pose, ranges, angles, dist, re
     out = np.empty(n)
     zs = np.empty((n, b))
     for i in prange(n):
-        c = np.cos(particles[i, 2])
-        s = np.sin(particles[i, 2])
-        lx = particles[i, 0] + c * laser_pose[0] - s * laser_pose[1]
-        ly = particles[i, 1] + s * laser_pose[0] + c * laser_pose[1]
-        lt = particles[i, 2] + laser_pose[2]
+        lx, ly, lt = _laser_in_map(particles, i, laser_pose)
         logp = 0.0
         for j in range(b):
             r = ranges[j]
@@ -116,11 +115,7 @@ def beam_kernel(particles, laser_pose, ranges, angles, cells, res, ox, oy, z_hit
     denom = 2.0 * sigma_hit * sigma_hit
     out = np.empty(n)
     for i in prange(n):
-        c = np.cos(particles[i, 2])
-        s = np.sin(particles[i, 2])
-        lx = particles[i, 0] + c * laser_pose[0] - s * laser_pose[1]
-        ly = particles[i, 1] + s * laser_pose[0] + c * laser_pose[1]
-        lt = particles[i, 2] + laser_pose[2]
+        lx, ly, lt = _laser_in_map(particles, i, laser_pose)
         p = 1.0
         for j in range(b):
             obs = ranges[j]

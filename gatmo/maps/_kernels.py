@@ -8,6 +8,28 @@ from numba import njit, prange
 
 
 @njit(cache=True, inline="always")
+def _dda_init(gx, gy, ix, iy, dx, dy, res):
+    """Amanatides-Woo set-up from grid coordinates (gx, gy) in cell (ix, iy) along unit
+    (dx, dy): steps, distances [m] to the first x and y cell boundaries, and per cell."""
+    big = 1e30
+    step_x = 1 if dx > 0 else -1
+    step_y = 1 if dy > 0 else -1
+    if dx != 0.0:
+        t_max_x = ((ix + 1 if dx > 0 else ix) - gx) / dx * res
+        t_dx = res / abs(dx)
+    else:
+        t_max_x = big
+        t_dx = big
+    if dy != 0.0:
+        t_max_y = ((iy + 1 if dy > 0 else iy) - gy) / dy * res
+        t_dy = res / abs(dy)
+    else:
+        t_max_y = big
+        t_dy = big
+    return step_x, step_y, t_max_x, t_max_y, t_dx, t_dy
+
+
+@njit(cache=True, inline="always")
 def _cast_one(cells, res, ox, oy, x0, y0, ang, max_range, stop_unknown):
     """Range from world (x0, y0) along ``ang`` to the entry of the first blocking cell."""
     h, w = cells.shape
@@ -22,23 +44,7 @@ def _cast_one(cells, res, ox, oy, x0, y0, ang, max_range, stop_unknown):
     v = cells[iy, ix]
     if v == 100 or (stop_unknown and v == -1):
         return 0.0
-    step_x = 1 if dx > 0 else -1
-    step_y = 1 if dy > 0 else -1
-    big = 1e30
-    if dx != 0.0:
-        nx = ix + 1 if dx > 0 else ix
-        t_max_x = (nx - gx) / dx * res
-        t_dx = res / abs(dx)
-    else:
-        t_max_x = big
-        t_dx = big
-    if dy != 0.0:
-        ny = iy + 1 if dy > 0 else iy
-        t_max_y = (ny - gy) / dy * res
-        t_dy = res / abs(dy)
-    else:
-        t_max_y = big
-        t_dy = big
+    step_x, step_y, t_max_x, t_max_y, t_dx, t_dy = _dda_init(gx, gy, ix, iy, dx, dy, res)
     while True:
         if t_max_x < t_max_y:
             t = t_max_x
@@ -100,23 +106,7 @@ def traverse_rays_kernel(cells_shape_h, cells_shape_w, res, ox, oy, x0, y0, ends
         iy = int(np.floor(gy0))
         eix = int(np.floor((ex - ox) / res))
         eiy = int(np.floor((ey - oy) / res))
-        step_x = 1 if dx > 0 else -1
-        step_y = 1 if dy > 0 else -1
-        big = 1e30
-        if dx != 0.0:
-            nx = ix + 1 if dx > 0 else ix
-            t_max_x = (nx - gx0) / dx * res
-            t_dx = res / abs(dx)
-        else:
-            t_max_x = big
-            t_dx = big
-        if dy != 0.0:
-            ny = iy + 1 if dy > 0 else iy
-            t_max_y = (ny - gy0) / dy * res
-            t_dy = res / abs(dy)
-        else:
-            t_max_y = big
-            t_dy = big
+        step_x, step_y, t_max_x, t_max_y, t_dx, t_dy = _dda_init(gx0, gy0, ix, iy, dx, dy, res)
         t = 0.0
         while True:
             if ix == eix and iy == eiy:
