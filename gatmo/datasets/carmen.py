@@ -116,8 +116,8 @@ class CarmenLog:
                             yield "laser", rec, lineno
                     else:
                         self.unknown_messages[kind] = self.unknown_messages.get(kind, 0) + 1
-                except ValueError:
-                    self._bad(stats, f"{kind}: non-numeric field", lineno, field=kind)
+                except (ValueError, IndexError, OverflowError):
+                    self._bad(stats, f"{kind}: missing or non-numeric field", lineno, field=kind)
 
     def _parse_flaser(self, parts, params, stats, lineno):
         kind = parts[0]
@@ -148,6 +148,9 @@ class CarmenLog:
         kind = parts[0]
         start, fov, res, max_range = (float(x) for x in parts[2:6])
         n = int(parts[8])
+        if not all(np.isfinite([start, fov, res, max_range])) or max_range <= 0:
+            self._bad(stats, f"{kind}: non-finite angles or range", lineno, field=kind)
+            return None
         i = 9 + n
         if n <= 0 or len(parts) < i + 1:
             self._bad(stats, f"{kind}: expected {n} readings", lineno, field=kind)

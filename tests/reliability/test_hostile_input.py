@@ -1,0 +1,116 @@
+"""Hostile input for every reader: success or a GatmoError, never another exception."""
+
+from __future__ import annotations
+
+import json
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from gatmo.errors import GatmoError
+
+SETTINGS = settings(max_examples=60, deadline=None,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+TOKENS = st.sampled_from(["FLASER", "ROBOTLASER1", "RAWLASER1", "ODOM", "PARAM", "TRUEPOS",
+                          "NEFF", "3", "180", "-1", "0.5", "nan", "inf", "1e309", "x", "",
+                          "#", "999999999", "-0", "L", "O"])
+LINES = st.lists(st.lists(TOKENS, max_size=12).map(" ".join), max_size=12).map("\n".join)
+
+
+def _only_gatmo_errors(fn):
+    try:
+        fn()
+    except GatmoError as exc:
+        assert "\n" not in str(exc)  # one line
+
+
+@SETTINGS
+@given(text=LINES)
+def test_carmen_reader(tmp_path, text):
+    from gatmo.datasets.carmen import CarmenLog
+
+    p = tmp_path / "x.log"
+    p.write_text(text)
+    _only_gatmo_errors(lambda: list(CarmenLog(p)))
+    _only_gatmo_errors(lambda: list(CarmenLog(p, skip_bad=True)))
+
+
+@SETTINGS
+@given(data=st.binary(max_size=300))
+def test_any_log_bytes(tmp_path, data):
+    from gatmo.datasets.open import open_log
+
+    p = tmp_path / "x.log"
+    p.write_bytes(data)
+    _only_gatmo_errors(lambda: list(open_log(p)))
+
+
+@SETTINGS
+@given(text=LINES)
+def test_wean_tum_relations(tmp_path, text):
+    from gatmo.datasets.relations import read_relations
+    from gatmo.datasets.tum import read_tum
+    from gatmo.datasets.wean import WeanLog
+
+    p = tmp_path / "x.txt"
+    p.write_text(text)
+    _only_gatmo_errors(lambda: list(WeanLog(p)))
+    _only_gatmo_errors(lambda: read_tum(p))
+    _only_gatmo_errors(lambda: read_relations(p))
+
+
+YAML_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10, 10**12),
+                        st.floats(allow_nan=True), st.text(max_size=8),
+                        st.lists(st.floats(allow_nan=False, allow_infinity=False), max_size=4))
+
+
+@SETTINGS
+@given(fields=st.dictionaries(st.sampled_from(["image", "resolution", "origin", "negate",
+                                               "occupied_thresh", "free_thresh", "mode",
+                                               "extra"]), YAML_VALUES, max_size=8),
+       pixels=st.binary(max_size=64))
+def test_map_yaml(tmp_path, fields, pixels):
+    import yaml
+
+    from gatmo.maps.io import load_map
+
+    (tmp_path / "m.pgm").write_bytes(b"P5\n4 4\n255\n" + pixels[:16].ljust(16, b"\0"))
+    if isinstance(fields.get("image"), str):
+        fields["image"] = "m.pgm" if fields["image"] == "" else fields["image"]
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(fields))
+    _only_gatmo_errors(lambda: load_map(tmp_path / "m.yaml"))
+
+
+@SETTINGS
+@given(fields=st.dictionaries(st.sampled_from(["min_particles", "max_particles", "laser_z_hit",
+                                               "odom_alpha1", "odom_model_type", "kld_err",
+                                               "laser_max_beams", "bogus"]), YAML_VALUES,
+                              max_size=6))
+def test_amcl_params(tmp_path, fields):
+    import yaml
+
+    from gatmo.localization.params import load_amcl_yaml
+
+    (tmp_path / "a.yaml").write_text(yaml.safe_dump(fields))
+    _only_gatmo_errors(lambda: load_amcl_yaml(tmp_path / "a.yaml"))
+
+
+JSONISH = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(), st.floats(),
+                                 st.text(max_size=5)),
+                       lambda c: st.lists(c, max_size=4) | st.dictionaries(st.text(max_size=5),
+                                                                           c, max_size=4),
+                       max_leaves=20)
+
+
+@SETTINGS
+@given(obj=st.fixed_dictionaries({"id": JSONISH, "status": JSONISH, "pose": JSONISH,
+                                  "shape_cells_xy": JSONISH, "history": JSONISH}),
+       version=st.sampled_from([1, 2, "1", None]))
+def test_objects_json(tmp_path, obj, version):
+    from gatmo.maps.object_io import load_objects
+
+    doc = {"format": "gatmo-objects", "version": version, "resolution_m": 0.05,
+           "next_id": 3, "objects": [obj]}
+    (tmp_path / "o.json").write_text(json.dumps(doc))
+    _only_gatmo_errors(lambda: load_objects(tmp_path / "o.json"))
