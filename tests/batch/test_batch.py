@@ -129,6 +129,10 @@ seeds: [0, 1]
     assert done.stat().st_mtime_ns == stamp
     rows2 = read_table(res2.results_path)
     assert sorted(int(r["scans"]) for r in rows2 if r["status"] == "skipped") == [3, 3, 5, 5]
+    # changed inputs (max_scans is part of the job id) invalidate the checkpoints
+    spec.write_text(spec.read_text() + "max_scans: 9\n")
+    res3 = run_batch(spec, out, workers=1)
+    assert (res3.ok, res3.failed, res3.skipped) == (4, 4, 0)
 
 
 def test_chain_receives_previous_objects_and_resumes(tmp_path):
@@ -204,3 +208,18 @@ def test_materialize_map_rebuilds_a_missing_map(tmp_path):
     p = materialize_map(str(tmp_path / "elsewhere" / "m.yaml"), b)
     assert Path(p).read_text() == MAP_YAML
     assert (Path(p).parent / "m.pgm").read_bytes() == (tmp_path / "maps" / "m.pgm").read_bytes()
+
+
+def test_ray_backend_without_ray_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    from gatmo.errors import MissingExtraError
+
+    _echo_world(tmp_path)
+    spec = _spec(tmp_path, "maps: {m: maps/m.yaml}\nlogs: [{map: m, glob: 'logs/a.log'}]\n"
+                           "command: echo\n")
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    with pytest.raises(MissingExtraError, match=r"pip install 'gatmo\[ray\]'"):
+        run_batch(spec, tmp_path / "out", backend="ray")
+    with pytest.raises(ConfigError, match="unknown backend"):
+        run_batch(spec, tmp_path / "out", backend="slurm")
