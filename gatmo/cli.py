@@ -301,6 +301,31 @@ def demo(
     _print_compare(result)
 
 
+# --------------------------------------------------------------------------- batch
+@app.command()
+def batch(
+    spec: Annotated[Path, typer.Argument(help="Batch SPEC.yaml: maps, logs, command, grid.")],
+    out: Annotated[Path, typer.Option("--out", help="Output folder (also the checkpoint).")],
+    backend: Annotated[str, typer.Option(help="local | ray")] = "local",
+    address: Annotated[str | None, typer.Option(help="Ray cluster address (ray://...).")] = None,
+    workers: Annotated[int | None, typer.Option(help="Parallel workers.")] = None,
+) -> None:
+    """Many jobs (localize | run | compare) over logs and a parameter grid, locally or on Ray."""
+    from gatmo.batch import run_batch
+
+    bar, update = _progress("batch")
+    with bar:
+        res = run_batch(spec, out, backend=backend, address=address, workers=workers,
+                        progress=update)
+    d = res.as_dict()
+    failed = d.pop("failed_jobs", [])
+    _print_mapping(f"batch -> {out}", d)
+    for f in failed[:10]:
+        _console().print(f"[red]failed:[/red] {f}")
+    if d.get("failed"):
+        raise typer.Exit(1)
+
+
 # ------------------------------------------------------------------------- config
 @config_app.command("dump")
 def config_dump(

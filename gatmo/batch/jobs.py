@@ -74,6 +74,8 @@ def finished_result(job: Job, out_root: str | Path) -> dict | None:
         data = json.loads(done.read_text())
     except (OSError, ValueError):
         return None  # a damaged checkpoint: redo the job
+    if data.get("job") != job.id:
+        return None  # same folder, other inputs (e.g. max_scans or the params file changed)
     obj = folder / "objects.json"
     return _result(job, "skipped", data.get("summary"), None,
                    str(obj) if obj.is_file() else None, float(data.get("seconds", 0.0)))

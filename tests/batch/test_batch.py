@@ -223,3 +223,27 @@ def test_ray_backend_without_ray_names_the_extra(tmp_path, monkeypatch):
         run_batch(spec, tmp_path / "out", backend="ray")
     with pytest.raises(ConfigError, match="unknown backend"):
         run_batch(spec, tmp_path / "out", backend="slurm")
+
+
+def test_cli_batch_runs_and_reports_failures(tmp_path, capsys):
+    from gatmo.cli import main
+
+    _echo_world(tmp_path)
+    spec = _spec(tmp_path, """
+maps: {m: maps/m.yaml}
+logs:
+  - {map: m, glob: "logs/*.log"}
+command: echo
+grid:
+  echo.fail: [false, true]
+""")
+    rc = main(["batch", str(spec), "--out", str(tmp_path / "out"), "--workers", "1"])
+    assert rc == 1  # half the jobs were told to fail
+    text = capsys.readouterr().out
+    assert "failed" in text
+    assert (tmp_path / "out" / "batch.json").exists()
+    rc = main(["batch", str(spec), "--out", str(tmp_path / "out"), "--workers", "1"])
+    assert rc == 1  # failed jobs are redone and fail again; finished ones are skipped
+    import json
+
+    assert json.loads((tmp_path / "out" / "batch.json").read_text())["skipped"] > 0
