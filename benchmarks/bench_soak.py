@@ -1,0 +1,82 @@
+"""Soak (issue 7): many consecutive simulated runs with the object map carried over, the
+furniture rearranged every time. Per run: objects placed in the map vs pieces in the world,
+peak RSS, ms per scan, localization error. What must stay flat stays flat, or it shows here.
+
+    python -m benchmarks.bench_soak [--runs 50] [--seconds 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path("bench-out")
+
+
+def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None) -> list[dict]:
+    from gatmo.datasets.carmen import CarmenLog
+    from gatmo.datasets.sim import SimConfig, simulate_scenario
+    from gatmo.maps.io import load_map
+    from gatmo.objects.mapper import GatmoMapper
+    from gatmo.pipeline.config import sim_stack_config
+    from gatmo.pipeline.runs import make_localizer, make_matcher
+    from gatmo.pipeline.stack import LocalizationStack
+
+    tmp = tmp or Path(tempfile.mkdtemp())
+    sim = SimConfig.for_preset("hall")
+    sim.robot.duration_s = seconds
+    scen = simulate_scenario(tmp / "soak", runs=runs, seed=seed, config=sim)
+    doc = json.loads(scen.scenario_json.read_text())
+    cfg = sim_stack_config()
+    base = load_map(scen.map_yaml)
+    mapper = GatmoMapper.from_config(cfg.gatmo, base)
+    rows = []
+    for k, log in enumerate(scen.logs):
+        scans = list(CarmenLog(log))
+        stack = LocalizationStack(
+            make_localizer(cfg, mapper.grid(), k, scans[0].gt_pose_xytheta, False),
+            make_matcher(cfg), mapper, cfg.fusion)
+        stack.begin_run(k + 1)
+        t0 = time.perf_counter()
+        err = []
+        for s in scans:
+            st = stack.step(s)
+            err.append(np.hypot(*(st.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
+        stack.end_run()
+        ms = (time.perf_counter() - t0) * 1e3 / len(scans)
+        om = mapper.object_map
+        rows.append({
+            "run": k + 1,
+            "pieces_in_world": len(doc["runs"][k]["objects"]),
+            "objects_placed": sum(1 for o in om.placed() if not o.structure),
+            "objects_total": len(om.objects),
+            "absent": len(om.A), "gamma": len(om.Gamma),
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "ms_per_scan": ms,
+            "median_err_m": float(np.median(err)),
+        })
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--runs", type=int, default=50)
+    ap.add_argument("--seconds", type=float, default=30.0)
+    args = ap.parse_args(argv or [])
+    rows = soak(args.runs, args.seconds)
+    for r in rows:
+        print(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
+                       for k, v in r.items()), flush=True)
+    OUT.mkdir(exist_ok=True)
+    (OUT / "soak.json").write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(__import__("sys").argv[1:]))
