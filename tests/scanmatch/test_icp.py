@@ -53,3 +53,21 @@ def test_scan_matching_odometry_beats_wheel_odometry():
 
     assert drift(poses) < 0.5 * drift(od)
     assert sm.stats["icp"] > 0.8 * len(scans)
+
+
+def test_kiss_icp_backend_follows_a_simulated_run():
+    from gatmo.datasets.sim import SimConfig, make_world, simulate_run
+    from gatmo.scanmatch.kiss import KissIcpBackend
+
+    rng = np.random.default_rng(6)
+    cfg = SimConfig.for_preset("office")
+    cfg.robot.duration_s = 15
+    world, route = make_world("office", rng)
+    scans = simulate_run(world, route, cfg, rng)
+    k = KissIcpBackend(voxel_m=0.05, max_range_m=10.0)
+    poses = np.array([k.register(s).pose_xytheta for s in scans])
+    gt = np.array([s.gt_pose_xytheta for s in scans])
+    est = relative(poses[0], poses[-1])
+    ref = relative(gt[0], gt[-1])
+    assert np.hypot(*ref[:2]) > 2.0
+    assert np.hypot(*(est[:2] - ref[:2])) < 0.25 * np.hypot(*ref[:2])

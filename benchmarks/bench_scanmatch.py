@@ -1,0 +1,56 @@
+"""Scan matching on the Kümmerle benchmark logs: relations error (mean ± std, translation m and
+rotation deg) of raw odometry, our ICP odometry and KISS-ICP, and ms per scan of both matchers,
+in the same run. Skipped when ../shared/data is absent.
+
+    python -m benchmarks.bench_scanmatch [--max-scans N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "slam-benchmark"
+OUT = Path("bench-out")
+
+
+def main(argv=None) -> int:
+    from gatmo.datasets.metrics import relations_error
+    from gatmo.datasets.relations import read_relations
+    from gatmo.datasets.rosbag import RosBag
+    from gatmo.scanmatch import IcpConfig, ScanMatchOdometry
+    from gatmo.scanmatch.kiss import KissIcpBackend
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--max-scans", type=int, default=None)
+    args = ap.parse_args(argv or [])
+    if not DATA.exists():
+        print(f"{DATA} not found: real data absent, nothing to measure")
+        return 0
+    out = {}
+    for name in ("mit-csail", "aces", "intel"):
+        scans = list(RosBag(DATA / f"{name}.sort.bag"))[: args.max_scans]
+        rel = read_relations(DATA / f"{name}.relations")
+        t = np.array([s.stamp_s for s in scans])
+        res = {"scans": len(scans)}
+        odom = np.array([s.odom_pose_xytheta for s in scans])
+        res["odometry"] = relations_error(t, odom, rel)
+        for label, matcher in (("ours", ScanMatchOdometry(IcpConfig())),
+                               ("kiss_icp", KissIcpBackend())):
+            t0 = time.perf_counter()
+            poses = np.array([matcher.register(s).pose_xytheta for s in scans])
+            ms = (time.perf_counter() - t0) * 1e3 / len(scans)
+            res[label] = dict(relations_error(t, poses, rel), ms_per_scan=ms)
+        out[name] = res
+        print(name, json.dumps(res), flush=True)
+    OUT.mkdir(exist_ok=True)
+    (OUT / "scanmatch.json").write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(__import__("sys").argv[1:]))
