@@ -31,7 +31,10 @@ app.add_typer(config_app, name="config")
 def _console(stderr: bool = False):
     from rich.console import Console
 
-    return Console(stderr=stderr, highlight=False)
+    c = Console(stderr=stderr, highlight=False)
+    if not c.is_terminal:  # logs and pipes: wide enough for the comparison table
+        c = Console(stderr=stderr, highlight=False, width=max(c.width, 160))
+    return c
 
 
 def _version_callback(value: bool) -> None:

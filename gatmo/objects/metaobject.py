@@ -114,7 +114,7 @@ class Metaobject:
         # size); a person keeps going
         # (the KF's speed is no verdict: the visible part of a still object changes with the
         # viewpoint and its centroid jumps by tenths of a metre between scans)
-        if self.travel_m() > 1.2:
+        if self.travel_m() > 1.2 or (self.n_obs >= 5 and self.speed_mps > 0.8):
             return "person"
         if self.n_obs < self.cfg.chair_min_scans:
             return "unknown"
