@@ -28,7 +28,8 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path) -> dict:
     scen = simulate_scenario(tmp / f"s{seed}", preset=preset, runs=runs, seed=seed)
     t0 = time.perf_counter()
     res = compare(scen.map_yaml, scen.logs, tmp / f"c{seed}", scenario_json=scen.scenario_json,
-                  config=sim_stack_config(), pictures=False)
+                  config=sim_stack_config(), pictures=False, keep_traces=True)
+    outcomes = piece_outcomes(scen, res, tmp / f"c{seed}")
     secs = time.perf_counter() - t0
     # the same world before anything moved: same seed, no rearrangement
     still = SimConfig.for_preset(preset)
@@ -56,8 +57,74 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path) -> dict:
         "gatmo_ms_per_scan": res.overall["gatmo"]["ms_per_scan"],
         "static_ms_per_scan": res.overall["static"]["ms_per_scan"],
         "compare_s": secs,
+        "outcomes": outcomes,
     }
     return out
+
+
+def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
+    """Per moved piece and run (paper, Table II / Fig. 5): label, outcome (found: right
+    object at the true pose; wrong: its object relocated elsewhere; absent: noticed gone,
+    not found; missed), and for relocations the scan index at which it happened."""
+    from gatmo.maps.object_io import load_objects
+    from gatmo.pipeline.evaluate import expected_pose, placement_error, tie_objects
+
+    doc = json.loads(Path(scen.scenario_json).read_text())
+    folders = sorted((cmp_dir / "gatmo").glob("*"))
+    out = []
+    for k, run in enumerate(doc["runs"]):
+        om = load_objects(folders[k] / "objects.json")
+        ties = tie_objects(om, doc)
+        p2o = {v: o for o, v in ties.items()}
+        events = res.traces[(k, "gatmo")].events
+        for c in run["changes"]:
+            if c["kind"] not in ("moved", "shifted") or c["id"] not in p2o:
+                continue
+            o = om.by_id[p2o[c["id"]]]
+            rel = [e for e in events if e["kind"] == "relocated" and e["object_id"] == o.id]
+            gone = any(e["kind"] == "absent" and e["object_id"] == o.id for e in events)
+            exp = expected_pose(o, c["id"], doc["map_objects"], run["objects"])
+            ok = False
+            if exp is not None and o.status in ("U", "M"):
+                md, cd = placement_error(o, exp)
+                ok = md < 0.1 and cd < 0.15
+            kind = "found" if ok else "wrong" if rel else "absent" if gone else "missed"
+            out.append({"run": k + 1, "label": c["label"], "outcome": kind,
+                        "scan": rel[-1]["scan_index"] if rel else None})
+    return out
+
+
+def table_ii(rows: list[dict]) -> dict:
+    """Outcome counts per label over all seeds and runs (the paper's Table II, by outcome)."""
+    t: dict[str, dict[str, int]] = {}
+    for r in rows:
+        for o in r["outcomes"]:
+            d = t.setdefault(o["label"], {"found": 0, "wrong": 0, "absent": 0, "missed": 0})
+            d[o["outcome"]] += 1
+    return t
+
+
+def fig_5(rows: list[dict], path: Path) -> None:
+    """Correct identifications vs scans into the run (the paper's Fig. 5), over all seeds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    outs = [o for r in rows for o in r["outcomes"]]
+    scans = sorted(o["scan"] for o in outs if o["outcome"] == "found")
+    wrong = sorted(o["scan"] for o in outs if o["outcome"] == "wrong" and o["scan"] is not None)
+    n = max(len(outs), 1)
+    fig, ax = plt.subplots(figsize=(5, 3.2), constrained_layout=True)
+    xs = np.arange(0, 601)
+    ax.step(xs, np.searchsorted(scans, xs, side="right") / n, where="post", label="correct")
+    ax.step(xs, np.searchsorted(wrong, xs, side="right") / n, where="post", label="wrong object")
+    ax.set_xlabel("scans into the run")
+    ax.set_ylabel("fraction of moved pieces")
+    ax.legend()
+    path.parent.mkdir(exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def main(argv=None) -> int:
@@ -73,8 +140,8 @@ def main(argv=None) -> int:
             row = one_seed(seed, args.preset, args.runs, Path(tmp))
             rows.append(row)
             print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
-                           for k, v in row.items()), flush=True)
-    a = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0]}
+                           for k, v in row.items() if k != "outcomes"), flush=True)
+    a = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0] if k != "outcomes"}
     total = {
         "preset": args.preset, "seeds": len(rows),
         "gatmo_over_static_ate_median": float(np.median(a["gatmo_ate_m"] / a["static_ate_m"])),
@@ -88,7 +155,10 @@ def main(argv=None) -> int:
         "gatmo_ms_per_scan": float(a["gatmo_ms_per_scan"].mean()),
         "static_ms_per_scan": float(a["static_ms_per_scan"].mean()),
     }
+    table = table_ii(rows)
+    total["table_ii"] = table
     print(json.dumps(total, indent=1))
+    fig_5(rows, OUT / f"fig5_{args.preset}.png")
     OUT.mkdir(exist_ok=True)
     (OUT / f"gatmo_sim_{args.preset}.json").write_text(json.dumps({"rows": rows,
                                                                    "total": total}, indent=1))
