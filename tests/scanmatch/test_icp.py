@@ -71,3 +71,35 @@ def test_kiss_icp_backend_follows_a_simulated_run():
     ref = relative(gt[0], gt[-1])
     assert np.hypot(*ref[:2]) > 2.0
     assert np.hypot(*(est[:2] - ref[:2])) < 0.25 * np.hypot(*ref[:2])
+
+
+def test_pose_graph_closes_a_loop_and_a_wrong_closure_is_down_weighted():
+    from gatmo.scanmatch.posegraph import GraphConfig, optimize
+
+    # a 4 m square driven twice, odometry with a heading drift of 0.5 deg per step
+    truth = []
+    for _lap in range(2):
+        for side in range(4):
+            for k in range(8):
+                th = side * np.pi / 2
+                start = [(0, 0), (4, 0), (4, 4), (0, 4)][side]
+                truth.append([start[0] + 0.5 * k * np.cos(th), start[1] + 0.5 * k * np.sin(th),
+                              th])
+    truth = np.array(truth)
+    odo = [truth[0]]
+    for i in range(1, len(truth)):
+        step = relative(truth[i - 1], truth[i]) + [0, 0, np.radians(0.5)]
+        odo.append(compose(odo[-1], step))
+    odo = np.array(odo)
+    n = len(truth)
+    good = [(i, i + 32, relative(truth[i], truth[i + 32])) for i in range(0, 32, 4)]
+    wrong = [(5, 50, np.array([2.0, -1.5, 0.8]))]
+    cfg = GraphConfig(closure_min_separation=10**6)  # no ICP search: closures given
+    empty = [np.zeros((0, 2))] * n
+    res = optimize(odo, empty, cfg, extra_closures=good + wrong)
+    err_odo = np.hypot(*(odo[:, :2] - truth[:, :2]).T).max()
+    err_opt = np.hypot(*(res.poses_xytheta[:, :2] - truth[:, :2]).T).max()
+    assert err_odo > 1.0 and err_opt < 0.5 * err_odo
+    res_bad = optimize(odo, empty, cfg, extra_closures=good)
+    err_clean = np.hypot(*(res_bad.poses_xytheta[:, :2] - truth[:, :2]).T).max()
+    assert err_opt < err_clean + 0.2  # the wrong closure barely moves the solution
