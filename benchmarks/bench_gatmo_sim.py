@@ -20,12 +20,15 @@ import numpy as np
 OUT = Path("bench-out")
 
 
-def one_seed(seed: int, preset: str, runs: int, tmp: Path) -> dict:
+def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None = None) -> dict:
     from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.pipeline.config import sim_stack_config
     from gatmo.pipeline.runs import compare
 
-    scen = simulate_scenario(tmp / f"s{seed}", preset=preset, runs=runs, seed=seed)
+    sim = SimConfig.for_preset(preset)
+    if seconds is not None:
+        sim.robot.duration_s = seconds
+    scen = simulate_scenario(tmp / f"s{seed}", preset=preset, runs=runs, seed=seed, config=sim)
     t0 = time.perf_counter()
     res = compare(scen.map_yaml, scen.logs, tmp / f"c{seed}", scenario_json=scen.scenario_json,
                   config=sim_stack_config(), pictures=False, keep_traces=True)
@@ -33,6 +36,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path) -> dict:
     secs = time.perf_counter() - t0
     # the same world before anything moved: same seed, no rearrangement
     still = SimConfig.for_preset(preset)
+    still.robot.duration_s = sim.robot.duration_s
     r = still.rearrange
     r.move_prob = r.shift_prob = r.remove_prob = 0.0
     r.add_count = 0
@@ -133,11 +137,12 @@ def main(argv=None) -> int:
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--preset", default="hall")
     ap.add_argument("--runs", type=int, default=4)
+    ap.add_argument("--seconds", type=float, default=None, help="run length (preset default)")
     args = ap.parse_args(argv or [])
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            row = one_seed(seed, args.preset, args.runs, Path(tmp))
+            row = one_seed(seed, args.preset, args.runs, Path(tmp), args.seconds)
             rows.append(row)
             print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
                            for k, v in row.items() if k != "outcomes"), flush=True)
