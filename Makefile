@@ -22,6 +22,13 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
+FUZZ_SECONDS ?= 60
+fuzz: $(STAMP)
+	$(BIN)/pip install -q -e '.[fuzz]'
+	for t in carmen wean tum map amcl objects; do \
+		$(BIN)/python fuzz/fuzz_readers.py $$t -max_total_time=$(FUZZ_SECONDS) || exit 1; \
+	done
+
 lint: $(STAMP)
 	$(BIN)/ruff check gatmo tests benchmarks
 

@@ -38,3 +38,26 @@ def numeric_rows(path: str | Path, layout: str) -> tuple[np.ndarray, np.ndarray]
         rows.append(row)
         lines.append(lineno)
     return np.array(rows, dtype=float).reshape(-1, k), np.array(lines, dtype=np.int64)
+
+
+def iter_lines(path: str | Path):
+    """(line number, text) of a plain or gzip text file; a corrupt or truncated gzip stream is a
+    FormatError naming the file, not an EOFError or zlib error from deep inside."""
+    import gzip
+    import zlib
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            gz = f.read(2) == b"\x1f\x8b"
+        fh = gzip.open(path, "rt", errors="replace") if gz else open(path, errors="replace")
+    except OSError as exc:
+        raise FormatError(f"cannot read: {exc.strerror or exc}", file=path) from None
+    lineno = 0
+    try:
+        with fh:
+            for lineno, line in enumerate(fh, start=1):  # noqa: B007 - reported below
+                yield lineno, line
+    except (EOFError, zlib.error, gzip.BadGzipFile, OSError) as exc:
+        raise FormatError(f"corrupt or truncated compressed data: {exc}", file=path,
+                          line=lineno + 1) from None

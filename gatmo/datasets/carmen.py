@@ -26,20 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from gatmo._io import atomic_write_bytes
+from gatmo.datasets._text import iter_lines
 from gatmo.datasets.types import ReadStats, Scan, sensor_info
 from gatmo.errors import DataError, FormatError
 from gatmo.geometry import interpolate_poses, relative
 
 LASER_MESSAGES = ("FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2", "RAWLASER1", "RAWLASER2",
                   "RAWLASER3", "RAWLASER4")
-
-
-def _open_text(path: Path):
-    with open(path, "rb") as f:
-        magic = f.read(2)
-    if magic == b"\x1f\x8b":
-        return gzip.open(path, "rt", errors="replace")
-    return open(path, errors="replace")
 
 
 class CarmenLog:
@@ -74,50 +67,45 @@ class CarmenLog:
         params: dict[str, str] = {}
         want = {"front": ("FLASER", "ROBOTLASER1", "RAWLASER1"),
                 "rear": ("RLASER", "ROBOTLASER2", "RAWLASER2")}.get(self.laser, LASER_MESSAGES)
-        try:
-            fh = _open_text(Path(self.path))
-        except OSError as exc:
-            raise FormatError(f"cannot read: {exc.strerror or exc}", file=self.path) from None
-        with fh:
-            for lineno, line in enumerate(fh, start=1):
-                parts = line.split()
-                if not parts or parts[0].startswith("#"):
-                    continue
-                kind = parts[0]
-                stats.records += 1
-                try:
-                    if kind == "PARAM":
-                        if len(parts) >= 3:
-                            params[parts[1]] = parts[2]
-                    elif kind == "ODOM":
-                        if len(parts) < 8:
-                            self._bad(stats, f"ODOM needs 9 fields, found {len(parts)}", lineno)
-                            continue
-                        v = [float(x) for x in parts[1:8]]
-                        yield "odom", {"stamp": v[6], "pose": v[0:3]}, lineno
-                    elif kind == "TRUEPOS":
-                        if len(parts) < 8:
-                            self._bad(stats, f"TRUEPOS needs 9 fields, found {len(parts)}",
-                                      lineno)
-                            continue
-                        v = [float(x) for x in parts[1:8]]
-                        yield "true", {"stamp": v[6], "pose": v[0:3]}, lineno
-                    elif kind in ("FLASER", "RLASER"):
-                        if kind not in want:
-                            continue
-                        rec = self._parse_flaser(parts, params, stats, lineno)
-                        if rec is not None:
-                            yield "laser", rec, lineno
-                    elif kind.startswith("ROBOTLASER") or kind.startswith("RAWLASER"):
-                        if kind not in want:
-                            continue
-                        rec = self._parse_robotlaser(parts, stats, lineno)
-                        if rec is not None:
-                            yield "laser", rec, lineno
-                    else:
-                        self.unknown_messages[kind] = self.unknown_messages.get(kind, 0) + 1
-                except (ValueError, IndexError, OverflowError):
-                    self._bad(stats, f"{kind}: missing or non-numeric field", lineno, field=kind)
+        for lineno, line in iter_lines(self.path):
+            parts = line.split()
+            if not parts or parts[0].startswith("#"):
+                continue
+            kind = parts[0]
+            stats.records += 1
+            try:
+                if kind == "PARAM":
+                    if len(parts) >= 3:
+                        params[parts[1]] = parts[2]
+                elif kind == "ODOM":
+                    if len(parts) < 8:
+                        self._bad(stats, f"ODOM needs 9 fields, found {len(parts)}", lineno)
+                        continue
+                    v = [float(x) for x in parts[1:8]]
+                    yield "odom", {"stamp": v[6], "pose": v[0:3]}, lineno
+                elif kind == "TRUEPOS":
+                    if len(parts) < 8:
+                        self._bad(stats, f"TRUEPOS needs 9 fields, found {len(parts)}",
+                                  lineno)
+                        continue
+                    v = [float(x) for x in parts[1:8]]
+                    yield "true", {"stamp": v[6], "pose": v[0:3]}, lineno
+                elif kind in ("FLASER", "RLASER"):
+                    if kind not in want:
+                        continue
+                    rec = self._parse_flaser(parts, params, stats, lineno)
+                    if rec is not None:
+                        yield "laser", rec, lineno
+                elif kind.startswith("ROBOTLASER") or kind.startswith("RAWLASER"):
+                    if kind not in want:
+                        continue
+                    rec = self._parse_robotlaser(parts, stats, lineno)
+                    if rec is not None:
+                        yield "laser", rec, lineno
+                else:
+                    self.unknown_messages[kind] = self.unknown_messages.get(kind, 0) + 1
+            except (ValueError, IndexError, OverflowError):
+                self._bad(stats, f"{kind}: missing or non-numeric field", lineno, field=kind)
 
     def _parse_flaser(self, parts, params, stats, lineno):
         kind = parts[0]

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gatmo.datasets._text import iter_lines
 from gatmo.datasets.types import ReadStats, Scan
 from gatmo.errors import DataError, FormatError
 from gatmo.geometry import relative
@@ -38,45 +39,40 @@ class WeanLog:
         stats = ReadStats()
         angles = np.radians(np.arange(180) - 90.0 + 0.5)
         last = -np.inf
-        try:
-            fh = _open(Path(self.path))
-        except OSError as exc:
-            raise FormatError(f"cannot read: {exc.strerror}", file=self.path) from None
-        with fh:
-            for lineno, line in enumerate(fh, start=1):
-                parts = line.split()
-                if not parts:
+        for lineno, line in iter_lines(self.path):
+            parts = line.split()
+            if not parts:
+                continue
+            stats.records += 1
+            if parts[0] != "L":
+                continue
+            if len(parts) != 1 + 6 + 180 + 1:
+                msg = f"L line needs 187 fields, found {len(parts) - 1}"
+                if self.skip_bad:
+                    stats.skip(f"line {lineno}: {msg}")
                     continue
-                stats.records += 1
-                if parts[0] != "L":
+                raise FormatError(msg, file=self.path, line=lineno, field="L")
+            try:
+                v = np.array(parts[1:], dtype=float)
+            except ValueError:
+                if self.skip_bad:
+                    stats.skip(f"line {lineno}: non-numeric")
                     continue
-                if len(parts) != 1 + 6 + 180 + 1:
-                    msg = f"L line needs 187 fields, found {len(parts) - 1}"
-                    if self.skip_bad:
-                        stats.skip(f"line {lineno}: {msg}")
-                        continue
-                    raise FormatError(msg, file=self.path, line=lineno, field="L")
-                try:
-                    v = np.array(parts[1:], dtype=float)
-                except ValueError:
-                    if self.skip_bad:
-                        stats.skip(f"line {lineno}: non-numeric")
-                        continue
-                    raise FormatError("non-numeric field", file=self.path, line=lineno) from None
-                t = float(v[-1])
-                if t <= last:
-                    if self.skip_bad:
-                        stats.skip(f"line {lineno}: stamp does not increase")
-                        continue
-                    raise DataError(f"timestamp {t} does not increase", file=self.path,
-                                    line=lineno)
-                last = t
-                robot = np.array([v[0] / 100.0, v[1] / 100.0, v[2]])
-                laser = np.array([v[3] / 100.0, v[4] / 100.0, v[5]])
-                stats.scans += 1
-                yield Scan(stamp_s=t, ranges_m=v[6:186] / 100.0, angles_rad=angles,
-                           range_min_m=0.0, range_max_m=81.83, odom_pose_xytheta=robot,
-                           laser_pose_xytheta=relative(robot, laser))
+                raise FormatError("non-numeric field", file=self.path, line=lineno) from None
+            t = float(v[-1])
+            if t <= last:
+                if self.skip_bad:
+                    stats.skip(f"line {lineno}: stamp does not increase")
+                    continue
+                raise DataError(f"timestamp {t} does not increase", file=self.path,
+                                line=lineno)
+            last = t
+            robot = np.array([v[0] / 100.0, v[1] / 100.0, v[2]])
+            laser = np.array([v[3] / 100.0, v[4] / 100.0, v[5]])
+            stats.scans += 1
+            yield Scan(stamp_s=t, ranges_m=v[6:186] / 100.0, angles_rad=angles,
+                       range_min_m=0.0, range_max_m=81.83, odom_pose_xytheta=robot,
+                       laser_pose_xytheta=relative(robot, laser))
         self.stats = stats
 
 

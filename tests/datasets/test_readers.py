@@ -196,3 +196,15 @@ def test_gz_garbage_is_a_format_error(tmp_path):
     with pytest.raises(FormatError):
         list(open_log(p))
     _ = compose
+
+
+def test_truncated_gzip_is_a_format_error(tmp_path):
+    # found by the atheris harness: gzip magic followed by garbage raised a bare exception
+    p = tmp_path / "t.log"
+    p.write_bytes(b"\x1f\x8b*\n")
+    with pytest.raises(FormatError, match="corrupt"):
+        list(CarmenLog(p))
+    from gatmo.datasets.wean import WeanLog
+
+    with pytest.raises(FormatError, match="corrupt"):
+        list(WeanLog(p))
