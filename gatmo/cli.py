@@ -27,6 +27,17 @@ config_app = typer.Typer(help="Show or write configuration files.", no_args_is_h
 app.add_typer(map_app, name="map")
 app.add_typer(config_app, name="config")
 
+# options several commands share
+FormatOpt = Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")]
+MapOpt = Annotated[Path, typer.Option("--map", help="map_server map YAML (the static map).")]
+ParamsOpt = Annotated[Path | None, typer.Option("--params", help="AMCL parameter YAML.")]
+ConfigOpt = Annotated[
+    Path | None, typer.Option("--config", help="gatmo stack YAML (gatmo config dump stack).")
+]
+PoseOpt = Annotated[str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")]
+GlobalOpt = Annotated[bool, typer.Option("--global", help="Global localization.")]
+
+
 
 def _console(stderr: bool = False):
     from rich.console import Console
@@ -112,7 +123,7 @@ def info(
     file: Annotated[
         Path, typer.Argument(help="Log, bag, map YAML, wean.dat, TUM or relations.")
     ],
-    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    fmt: FormatOpt = None,
 ) -> None:
     """Summarise a data file: sensor, beams, FOV, range, scans, duration, path, topics."""
     from gatmo.datasets.info import summarize
@@ -152,15 +163,13 @@ def simulate(
 # ----------------------------------------------------------------------- localize
 @app.command()
 def localize(
-    map_yaml: Annotated[Path, typer.Option("--map", help="map_server map YAML.")],
+    map_yaml: MapOpt,
     log: Annotated[Path, typer.Option("--log", help="Log or bag with scans and odometry.")],
     out: Annotated[Path, typer.Option("--out", help="Output TUM trajectory.")],
-    params: Annotated[Path | None, typer.Option("--params", help="AMCL parameter YAML.")] = None,
-    initial_pose: Annotated[
-        str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")
-    ] = None,
-    global_loc: Annotated[bool, typer.Option("--global", help="Global localization.")] = False,
-    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    params: ParamsOpt = None,
+    initial_pose: PoseOpt = None,
+    global_loc: GlobalOpt = False,
+    fmt: FormatOpt = None,
     max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
 ) -> None:
     """Monte Carlo localization of a log in a static map; writes the pose at every scan (TUM)."""
@@ -185,21 +194,17 @@ def localize(
 # ---------------------------------------------------------------------------- run
 @app.command()
 def run(
-    map_yaml: Annotated[Path, typer.Option("--map", help="map_server map YAML (the static map).")],
+    map_yaml: MapOpt,
     log: Annotated[Path, typer.Option("--log", help="Log or bag with scans and odometry.")],
     out: Annotated[Path, typer.Option("--out", help="Output folder.")],
     objects: Annotated[
         Path | None, typer.Option("--objects", help="objects.json from an earlier run.")
     ] = None,
-    params: Annotated[Path | None, typer.Option("--params", help="AMCL parameter YAML.")] = None,
-    config: Annotated[
-        Path | None, typer.Option("--config", help="gatmo stack YAML (gatmo config dump stack).")
-    ] = None,
-    initial_pose: Annotated[
-        str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")
-    ] = None,
-    global_loc: Annotated[bool, typer.Option("--global", help="Global localization.")] = False,
-    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    params: ParamsOpt = None,
+    config: ConfigOpt = None,
+    initial_pose: PoseOpt = None,
+    global_loc: GlobalOpt = False,
+    fmt: FormatOpt = None,
     max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
 ) -> None:
     """Full stack (localizer + scan matcher + GATMO) on one log: poses, objects, map, events."""
@@ -255,21 +260,19 @@ def _print_compare(result) -> None:
 @app.command()
 def compare(
     logs: Annotated[list[Path], typer.Argument(help="Logs in the order they were recorded.")],
-    map_yaml: Annotated[Path, typer.Option("--map", help="map_server map YAML (the static map).")],
+    map_yaml: MapOpt,
     out: Annotated[Path, typer.Option("--out", help="Output folder.")],
-    params: Annotated[Path | None, typer.Option("--params", help="AMCL parameter YAML.")] = None,
-    config: Annotated[Path | None, typer.Option("--config", help="gatmo stack YAML.")] = None,
-    initial_pose: Annotated[
-        str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")
-    ] = None,
-    global_loc: Annotated[bool, typer.Option("--global", help="Global localization.")] = False,
+    params: ParamsOpt = None,
+    config: ConfigOpt = None,
+    initial_pose: PoseOpt = None,
+    global_loc: GlobalOpt = False,
     ground_truth: Annotated[
         list[Path] | None, typer.Option("--ground-truth", help="TUM ground truth, one per log.")
     ] = None,
     relations: Annotated[
         Path | None, typer.Option("--relations", help="Kuemmerle relations file.")
     ] = None,
-    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    fmt: FormatOpt = None,
     max_scans: Annotated[int | None, typer.Option(help="At most this many scans per log.")] = None,
     scenario: Annotated[
         Path | None, typer.Option("--scenario", help="scenario.json of a simulated scenario.")
@@ -374,7 +377,7 @@ def map_render(
     out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it).")],
     resolution: Annotated[float, typer.Option(help="Cell size [m].")] = 0.05,
     max_range: Annotated[float, typer.Option(help="Use returns up to this range [m].")] = 20.0,
-    fmt: Annotated[str | None, typer.Option("--format", help="carmen | rosbag | wean")] = None,
+    fmt: FormatOpt = None,
 ) -> None:
     """Render an occupancy map from a log whose poses are known (log-odds, map_server output)."""
     from gatmo.pipeline.mapping import render_reference_map

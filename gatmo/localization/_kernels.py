@@ -19,13 +19,23 @@ def _laser_in_map(particles, i, laser_pose):
             particles[i, 2] + laser_pose[2])
 
 
+@njit(cache=True, inline="always")
+def _dist_at(dist, res, ox, oy, x, y, max_dist):
+    """Field value at a map point; off the map, ``max_dist`` (AMCL's off-map endpoint)."""
+    h, w = dist.shape
+    ix = int(np.floor((x - ox) / res))
+    iy = int(np.floor((y - oy) / res))
+    if ix < 0 or iy < 0 or ix >= w or iy >= h:
+        return max_dist
+    return dist[iy, ix]
+
+
 @njit(cache=True, parallel=True)
 def likelihood_field_kernel(particles, laser_pose, ranges, angles, dist, res, ox, oy, max_dist,
                             z_hit, z_rand, sigma_hit, range_max):
     """ROS AMCL's likelihood field: p = 1 + sum_k pz_k^3 per particle (N,)."""
     n = particles.shape[0]
     b = ranges.shape[0]
-    h, w = dist.shape
     denom = 2.0 * sigma_hit * sigma_hit
     rand = z_rand / range_max
     out = np.empty(n)
@@ -35,14 +45,7 @@ def likelihood_field_kernel(particles, laser_pose, ranges, angles, dist, res, ox
         for j in range(b):
             r = ranges[j]
             a = lt + angles[j]
-            hx = lx + r * np.cos(a)
-            hy = ly + r * np.sin(a)
-            ix = int(np.floor((hx - ox) / res))
-            iy = int(np.floor((hy - oy) / res))
-            if ix < 0 or iy < 0 or ix >= w or iy >= h:
-                z = max_dist
-            else:
-                z = dist[iy, ix]
+            z = _dist_at(dist, res, ox, oy, lx + r * np.cos(a), ly + r * np.sin(a), max_dist)
             pz = z_hit * np.exp(-(z * z) / denom) + rand
             p += pz * pz * pz
         out[i] = p
@@ -82,7 +85,6 @@ def likelihood_field_prob_kernel(particles, laser_pose, ranges, angles, dist, re
     returns the per-particle distances (N, B) for beam skipping."""
     n = particles.shape[0]
     b = ranges.shape[0]
-    h, w = dist.shape
     denom = 2.0 * sigma_hit * sigma_hit
     rand = z_rand / range_max
     out = np.empty(n)
@@ -93,12 +95,7 @@ def likelihood_field_prob_kernel(particles, laser_pose, ranges, angles, dist, re
         for j in range(b):
             r = ranges[j]
             a = lt + angles[j]
-            ix = int(np.floor((lx + r * np.cos(a) - ox) / res))
-            iy = int(np.floor((ly + r * np.sin(a) - oy) / res))
-            if ix < 0 or iy < 0 or ix >= w or iy >= h:
-                z = max_dist
-            else:
-                z = dist[iy, ix]
+            z = _dist_at(dist, res, ox, oy, lx + r * np.cos(a), ly + r * np.sin(a), max_dist)
             zs[i, j] = z
             if use_beam[j]:
                 logp += np.log(z_hit * np.exp(-(z * z) / denom) + rand)

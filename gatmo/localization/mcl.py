@@ -179,7 +179,9 @@ class MonteCarloLocalizer:
             # wheel slip or an odometry reset: restart around the last estimate
             self.stats.odom_resets += 1
             cov = self.initial_cov() * 4.0
-            self.set_initial_pose(self._est, cov) if self._on_map(self._est) else \
+            if self._on_map(self._est):
+                self.set_initial_pose(self._est, cov)
+            else:
                 self.global_localization()
             self._odom_at_update = odom.copy()
         self._odom_last = odom.copy()

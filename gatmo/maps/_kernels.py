@@ -30,6 +30,14 @@ def _dda_init(gx, gy, ix, iy, dx, dy, res):
 
 
 @njit(cache=True, inline="always")
+def _dda_step(ix, iy, t_max_x, t_max_y, step_x, step_y, t_dx, t_dy):
+    """Cross into the next cell: (distance at entry, ix, iy, next t_max_x, next t_max_y)."""
+    if t_max_x < t_max_y:
+        return t_max_x, ix + step_x, iy, t_max_x + t_dx, t_max_y
+    return t_max_y, ix, iy + step_y, t_max_x, t_max_y + t_dy
+
+
+@njit(cache=True, inline="always")
 def _cast_one(cells, res, ox, oy, x0, y0, ang, max_range, stop_unknown):
     """Range from world (x0, y0) along ``ang`` to the entry of the first blocking cell."""
     h, w = cells.shape
@@ -46,14 +54,8 @@ def _cast_one(cells, res, ox, oy, x0, y0, ang, max_range, stop_unknown):
         return 0.0
     step_x, step_y, t_max_x, t_max_y, t_dx, t_dy = _dda_init(gx, gy, ix, iy, dx, dy, res)
     while True:
-        if t_max_x < t_max_y:
-            t = t_max_x
-            ix += step_x
-            t_max_x += t_dx
-        else:
-            t = t_max_y
-            iy += step_y
-            t_max_y += t_dy
+        t, ix, iy, t_max_x, t_max_y = _dda_step(ix, iy, t_max_x, t_max_y, step_x, step_y,
+                                                t_dx, t_dy)
         if t >= max_range:
             return max_range
         if ix < 0 or iy < 0 or ix >= w or iy >= h:
@@ -130,12 +132,6 @@ def traverse_rays_kernel(cells_shape_h, cells_shape_w, res, ox, oy, x0, y0, ends
                 out[k, 1] = iy
                 idx[k] = r
                 k += 1
-            if t_max_x < t_max_y:
-                t = t_max_x
-                ix += step_x
-                t_max_x += t_dx
-            else:
-                t = t_max_y
-                iy += step_y
-                t_max_y += t_dy
+            t, ix, iy, t_max_x, t_max_y = _dda_step(ix, iy, t_max_x, t_max_y, step_x, step_y,
+                                                    t_dx, t_dy)
     return out[:k].copy(), idx[:k].copy()

@@ -65,6 +65,7 @@ class GatmoMapper:
         self.base = base_grid.copy()
         self.cfg = cfg
         self.run = 0
+        self._last_stamp = 0.0
         self._grid = object_map.render(self.base)
         self._explain = LikelihoodField(self._grid.copy(), cfg.delta_W_m + 0.1)
         self._pending: list[tuple[np.ndarray, int, int]] = []
@@ -178,7 +179,6 @@ class GatmoMapper:
         self._rerender()
         return events
 
-    _last_stamp = 0.0
 
     # ---------------------------------------------------------------- update
     def update(self, pose_xytheta, scan: Scan, *, pose_confident: bool,
@@ -192,7 +192,6 @@ class GatmoMapper:
             self._expire(stamp_s, events)
             return events
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
-        valid = scan.valid
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
         far = self._explain.distance_at(pts) > self.cfg.delta_W_m
         if len(pts) and 1.0 - far.mean() < self.cfg.min_explained_fraction:
@@ -200,7 +199,7 @@ class GatmoMapper:
             self.counts["skipped_poor_fit"] = self.counts.get("skipped_poor_fit", 0) + 1
             self._expire(stamp_s, events)
             return events
-        self._absence(lp, scan, valid, pts, stamp_s, events)
+        self._absence(lp, scan, pts, stamp_s, events)
         unexplained = pts[far]
         self._track(unexplained, stamp_s, events)
         self._expire(stamp_s, events)
@@ -208,7 +207,7 @@ class GatmoMapper:
         return events
 
     # Algorithm 1, with hits clearing seen-through marks (beyond the paper)
-    def _absence(self, lp, scan, valid, pts, stamp_s, events) -> None:
+    def _absence(self, lp, scan, pts, stamp_s, events) -> None:
         g = self._grid
         c = self.cfg
         r = scan.ranges_m

@@ -7,35 +7,24 @@ from pathlib import Path
 from pydantic import Field
 
 from gatmo.config import GatmoModel, dump_model, load_model
+from gatmo.localization.config import AmclConfig
+from gatmo.objects.config import GatmoConfig
 from gatmo.pipeline.stack import FusionConfig
+from gatmo.scanmatch.odometry import IcpConfig
 
 
-def _stack_config_class():
-    from gatmo.localization.config import AmclConfig
-    from gatmo.objects.config import GatmoConfig
-    from gatmo.scanmatch.odometry import IcpConfig
+class StackConfig(GatmoModel):
+    """amcl: localizer; gatmo: object map; icp: scan matcher; fusion: offset resets."""
 
-    class StackConfig(GatmoModel):
-        """amcl: localizer; gatmo: object map; icp: scan matcher; fusion: offset resets."""
+    amcl: AmclConfig = Field(default_factory=AmclConfig)
+    gatmo: GatmoConfig = Field(default_factory=GatmoConfig)
+    icp: IcpConfig = Field(default_factory=IcpConfig)
+    fusion: FusionConfig = Field(default_factory=FusionConfig)
+    seed: int = 0
 
-        amcl: AmclConfig = Field(default_factory=AmclConfig)
-        gatmo: GatmoConfig = Field(default_factory=GatmoConfig)
-        icp: IcpConfig = Field(default_factory=IcpConfig)
-        fusion: FusionConfig = Field(default_factory=FusionConfig)
-        seed: int = 0
 
+def stack_config_class() -> type[StackConfig]:
     return StackConfig
-
-
-_CLASS = None
-
-
-def stack_config_class():
-    """The StackConfig model (built lazily so that importing the pipeline stays cheap)."""
-    global _CLASS
-    if _CLASS is None:
-        _CLASS = _stack_config_class()
-    return _CLASS
 
 
 def load_stack_config(config_path: str | Path | None = None, params_path: str | Path | None = None):
@@ -45,8 +34,7 @@ def load_stack_config(config_path: str | Path | None = None, params_path: str | 
     ``gatmo config dump stack``. ``params_path``: a ROS 1 / Nav2 AMCL YAML that replaces the
     ``amcl`` section, so an AMCL user's file drops in unchanged.
     """
-    cls = stack_config_class()
-    cfg = load_model(cls, config_path) if config_path is not None else cls()
+    cfg = load_model(StackConfig, config_path) if config_path is not None else StackConfig()
     if params_path is not None:
         from gatmo.localization.params import load_amcl_yaml
 
@@ -57,9 +45,9 @@ def load_stack_config(config_path: str | Path | None = None, params_path: str | 
 def sim_stack_config():
     """The stack config the demo uses on simulated halls: the likelihood_field_prob model with
     sigma_hit 0.1 m (ROS's default likelihood_field weighs so flatly that the filter trails the
-    robot by 0.15 m in a furniture hall, measured with `/tmp`-free runs in benchmarks), ROS 1's
+    robot by 0.15 m in a furniture hall), ROS 1's
     laser weights (z_hit 0.95, z_rand 0.05) and odometry noise matched to the simulator's."""
-    cfg = stack_config_class()()
+    cfg = StackConfig()
     a = cfg.amcl
     for k, v in dict(laser_model="likelihood_field_prob", sigma_hit_m=0.1,
                      z_hit=0.95, z_rand=0.05, alpha1=0.05, alpha2=0.05, alpha3=0.05,
@@ -73,4 +61,4 @@ def dump_stack_config(cfg) -> str:
     return dump_model(cfg)
 
 
-__all__ = ["dump_stack_config", "load_stack_config", "stack_config_class"]
+__all__ = ["StackConfig", "dump_stack_config", "load_stack_config", "stack_config_class"]

@@ -22,7 +22,7 @@ import numpy as np
 
 from gatmo._io import atomic_write_text
 from gatmo.errors import DataError, GatmoError
-from gatmo.maps.grid import OCCUPIED, UNKNOWN, OccupancyGrid
+from gatmo.maps.grid import UNKNOWN, OccupancyGrid
 from gatmo.pipeline.stack import LocalizationStack
 
 Progress = Callable[[int, int | None], None]
@@ -140,18 +140,10 @@ def make_localizer(cfg, grid: OccupancyGrid, seed: int, initial_pose, global_loc
 
     loc = MonteCarloLocalizer.from_config(cfg.amcl, grid, rng=np.random.default_rng(seed))
     if initial_pose is not None:
-        loc.set_initial_pose(np.asarray(initial_pose, dtype=float), initial_cov(cfg.amcl))
+        loc.set_initial_pose(np.asarray(initial_pose, dtype=float))
     else:
         loc.global_localization()
     return loc
-
-
-def initial_cov(amcl_cfg) -> np.ndarray:
-    """The initial covariance from the AMCL config (AMCL's initial_cov_xx/yy/aa)."""
-    xx = getattr(amcl_cfg, "initial_cov_xx_m2", 0.25)
-    yy = getattr(amcl_cfg, "initial_cov_yy_m2", 0.25)
-    aa = getattr(amcl_cfg, "initial_cov_aa_rad2", (np.pi / 12) ** 2)
-    return np.diag([xx, yy, aa])
 
 
 def make_matcher(cfg):
@@ -543,7 +535,6 @@ __all__ = [
     "load_scans",
     "run_gatmo",
     "score",
-    "OCCUPIED",
 ]
 
 

@@ -119,8 +119,9 @@ class StackStep:
     ms: float = 0.0
 
 
-def is_confident(estimate, fusion: FusionConfig) -> bool:
-    """The paper's reset test on the particle covariance (Sec. IV-B)."""
+def is_confident(estimate, fusion: FusionConfig, *, strict: bool = False) -> bool:
+    """The paper's reset test on the particle covariance (Sec. IV-B); ``strict`` applies the
+    tighter thresholds GATMO's absence test needs."""
     if not getattr(estimate, "updated", True):
         return False
     cov = np.asarray(estimate.cov, dtype=float)
@@ -128,6 +129,9 @@ def is_confident(estimate, fusion: FusionConfig) -> bool:
         return False
     std_xy = float(np.sqrt(max(cov[0, 0], cov[1, 1], 0.0)))
     std_th = float(np.degrees(np.sqrt(max(cov[2, 2], 0.0))))
+    if strict:
+        return (std_xy <= fusion.absence_max_std_xy_m
+                and std_th <= fusion.absence_max_std_theta_deg)
     return std_xy <= fusion.reset_max_std_xy_m and std_th <= fusion.reset_max_std_theta_deg
 
 
@@ -214,9 +218,7 @@ class LocalizationStack:
         events: list = []
         changed = False
         if self.mapper is not None:
-            strict = FusionConfig(reset_max_std_xy_m=self.fusion.absence_max_std_xy_m,
-                                  reset_max_std_theta_deg=self.fusion.absence_max_std_theta_deg)
-            pose_ok = is_confident(est, strict) or (
+            pose_ok = is_confident(est, self.fusion, strict=True) or (
                 confident and self._travel_since_reset_m <= self.fusion.confident_for_m)
             map_pose = pose
             if pose_ok and self.fusion.align_to_map:
