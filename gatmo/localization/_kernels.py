@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from gatmo.maps._kernels import _cast_one
+from gatmo.maps._kernels import _cast_one, _lut_one, _march_one
 
 
 @njit(cache=True, inline="always")
@@ -52,29 +52,44 @@ def likelihood_field_kernel(particles, laser_pose, ranges, angles, dist, res, ox
     return out
 
 
+@njit(cache=True, inline="always")
+def _table_particle(particles, i, laser_pose, bx, by, table, inv, ox, oy, off_value):
+    h, w = table.shape
+    lx, ly, lt = _laser_in_map(particles, i, laser_pose)
+    lc = np.cos(lt)
+    ls = np.sin(lt)
+    p = 1.0
+    for j in range(bx.shape[0]):
+        ix = int(np.floor((lx + lc * bx[j] - ls * by[j] - ox) * inv))
+        iy = int(np.floor((ly + ls * bx[j] + lc * by[j] - oy) * inv))
+        if ix < 0 or iy < 0 or ix >= w or iy >= h:
+            p += off_value
+        else:
+            p += table[iy, ix]
+    return p
+
+
 @njit(cache=True, parallel=True)
 def likelihood_table_kernel(particles, laser_pose, bx, by, table, res, ox, oy, off_value):
     """The likelihood field with pz^3 precomputed per cell (``table``) and beam endpoints
     precomputed in the laser frame (bx, by): p = 1 + sum_k table[cell(endpoint_k)] (N,).
     Same result as :func:`likelihood_field_kernel` without a trig or exp per beam."""
     n = particles.shape[0]
-    b = bx.shape[0]
-    h, w = table.shape
     out = np.empty(n)
     inv = 1.0 / res
     for i in prange(n):
-        lx, ly, lt = _laser_in_map(particles, i, laser_pose)
-        lc = np.cos(lt)
-        ls = np.sin(lt)
-        p = 1.0
-        for j in range(b):
-            ix = int(np.floor((lx + lc * bx[j] - ls * by[j] - ox) * inv))
-            iy = int(np.floor((ly + ls * bx[j] + lc * by[j] - oy) * inv))
-            if ix < 0 or iy < 0 or ix >= w or iy >= h:
-                p += off_value
-            else:
-                p += table[iy, ix]
-        out[i] = p
+        out[i] = _table_particle(particles, i, laser_pose, bx, by, table, inv, ox, oy, off_value)
+    return out
+
+
+@njit(cache=True)
+def likelihood_table_kernel_serial(particles, laser_pose, bx, by, table, res, ox, oy, off_value):
+    """:func:`likelihood_table_kernel` on the calling thread only."""
+    n = particles.shape[0]
+    out = np.empty(n)
+    inv = 1.0 / res
+    for i in range(n):
+        out[i] = _table_particle(particles, i, laser_pose, bx, by, table, inv, ox, oy, off_value)
     return out
 
 
@@ -129,3 +144,113 @@ def beam_kernel(particles, laser_pose, ranges, angles, cells, res, ox, oy, z_hit
         out[i] = p
     return out
 
+
+
+@njit(cache=True, inline="always")
+def _beam_march_particle(particles, i, laser_pose, ranges, ca, sa, short, const, sd, inv_res, ox,
+                         oy, z_hit, inv_denom, max_t, res, jump_min):
+    """The beam model's p = 1 + sum_k pz_k^3 for particle i, ranges by :func:`_march_one`."""
+    lx, ly, lt = _laser_in_map(particles, i, laser_pose)
+    lc = np.cos(lt)
+    ls = np.sin(lt)
+    gx = (lx - ox) * inv_res
+    gy = (ly - oy) * inv_res
+    p = 1.0
+    for j in range(ranges.shape[0]):
+        t = _march_one(sd, gx, gy, lc * ca[j] - ls * sa[j], ls * ca[j] + lc * sa[j], max_t,
+                       jump_min)
+        mr = t * res if t < max_t else max_t * res
+        z = ranges[j] - mr
+        pz = z_hit * np.exp(-(z * z) * inv_denom) + const[j]
+        if z < 0:
+            pz += short[j]
+        p += pz * pz * pz
+    return p
+
+
+@njit(cache=True, parallel=True)
+def beam_march_kernel(particles, laser_pose, ranges, ca, sa, short, const, sd, res, ox, oy,
+                      z_hit, sigma_hit, range_max, jump_min):
+    """:func:`beam_kernel` with ranges by exact distance-field marching on ``sd`` (a
+    :func:`gatmo.maps.raycast.march_table`), beam directions (ca, sa) = (cos, sin) of the beam
+    angles, and the per-beam terms precomputed: ``short`` = z_short lambda exp(-lambda obs),
+    ``const`` = z_max if obs >= range_max else z_rand / range_max. (N,)"""
+    n = particles.shape[0]
+    out = np.empty(n)
+    inv_res = 1.0 / res
+    inv_denom = 1.0 / (2.0 * sigma_hit * sigma_hit)
+    max_t = range_max * inv_res
+    for i in prange(n):
+        out[i] = _beam_march_particle(particles, i, laser_pose, ranges, ca, sa, short, const, sd,
+                                      inv_res, ox, oy, z_hit, inv_denom, max_t, res, jump_min)
+    return out
+
+
+@njit(cache=True)
+def beam_march_kernel_serial(particles, laser_pose, ranges, ca, sa, short, const, sd, res, ox,
+                             oy, z_hit, sigma_hit, range_max, jump_min):
+    """:func:`beam_march_kernel` on the calling thread only (small sets: no thread wake-up)."""
+    n = particles.shape[0]
+    out = np.empty(n)
+    inv_res = 1.0 / res
+    inv_denom = 1.0 / (2.0 * sigma_hit * sigma_hit)
+    max_t = range_max * inv_res
+    for i in range(n):
+        out[i] = _beam_march_particle(particles, i, laser_pose, ranges, ca, sa, short, const, sd,
+                                      inv_res, ox, oy, z_hit, inv_denom, max_t, res, jump_min)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const, index, table,
+                       scale_cells, inv_res, ox, oy, z_hit, inv_denom, max_t, res, angles_step):
+    """The beam model's p for particle i, ranges by :func:`_lut_one` (approximate)."""
+    lx, ly, lt = _laser_in_map(particles, i, laser_pose)
+    lc = np.cos(lt)
+    ls = np.sin(lt)
+    gx = (lx - ox) * inv_res
+    gy = (ly - oy) * inv_res
+    p = 1.0
+    for j in range(ranges.shape[0]):
+        t = _lut_one(index, table, scale_cells, gx, gy, lt + angles_step[j],
+                     lc * ca[j] - ls * sa[j], ls * ca[j] + lc * sa[j], max_t)
+        mr = t * res if t < max_t else max_t * res
+        z = ranges[j] - mr
+        pz = z_hit * np.exp(-(z * z) * inv_denom) + const[j]
+        if z < 0:
+            pz += short[j]
+        p += pz * pz * pz
+    return p
+
+
+@njit(cache=True, parallel=True)
+def beam_lut_kernel(particles, laser_pose, ranges, angles, ca, sa, short, const, index, table,
+                    scale_cells, res, ox, oy, z_hit, sigma_hit, range_max):
+    """:func:`beam_march_kernel` with approximate ranges from a range table
+    (:class:`gatmo.maps.raycast.RangeTable`: ``index``, ``table``, ``scale_cells``). (N,)"""
+    n = particles.shape[0]
+    out = np.empty(n)
+    inv_res = 1.0 / res
+    inv_denom = 1.0 / (2.0 * sigma_hit * sigma_hit)
+    max_t = range_max * inv_res
+    for i in prange(n):
+        out[i] = _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const,
+                                    index, table, scale_cells, inv_res, ox, oy, z_hit, inv_denom,
+                                    max_t, res, angles)
+    return out
+
+
+@njit(cache=True)
+def beam_lut_kernel_serial(particles, laser_pose, ranges, angles, ca, sa, short, const, index,
+                           table, scale_cells, res, ox, oy, z_hit, sigma_hit, range_max):
+    """:func:`beam_lut_kernel` on the calling thread only."""
+    n = particles.shape[0]
+    out = np.empty(n)
+    inv_res = 1.0 / res
+    inv_denom = 1.0 / (2.0 * sigma_hit * sigma_hit)
+    max_t = range_max * inv_res
+    for i in range(n):
+        out[i] = _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const,
+                                    index, table, scale_cells, inv_res, ox, oy, z_hit, inv_denom,
+                                    max_t, res, angles)
+    return out

@@ -68,11 +68,24 @@ def beam_reference(particles, laser_pose, ranges, angles, grid, z_hit, z_short, 
 class SensorModel:
     """Weighs particles against a scan with one of AMCL's laser models."""
 
-    def __init__(self, field: LikelihoodField, cfg) -> None:
+    #: beam model ray casters: "march" (exact: jumps on the distance transform, cell walk near
+    #: obstacles), "dda" (exact: cell walk all the way, the reference kernel), "lut" (approximate:
+    #: ranges precomputed per free cell and heading bin, see :mod:`gatmo.maps.raycast`)
+    RAY_CASTERS = ("march", "dda", "lut")
+    #: below this many beam evaluations per update the kernels run on the calling thread: waking
+    #: a second thread costs more than it saves there, and far more when the core is shared
+    PARALLEL_MIN_EVALS = {"march": 40_000, "dda": 20_000, "lut": 400_000, "field": 400_000}
+
+    def __init__(self, field: LikelihoodField, cfg, ray_caster: str = "march") -> None:
         self.field = field
         self.cfg = cfg
+        self.ray_caster = ray_caster
         self._table = None
         self._table_key = None
+        self._march = None
+        self._march_key = None
+        self._lut = None
+        self._lut_key = None
 
     def _pz3_table(self, rmax: float):
         """pz^3 per cell, refreshed (by region) when the field or range_max changes."""
@@ -97,6 +110,66 @@ class SensorModel:
             self._table_version = f.version
         return self._table, float(pz3(np.float64(f.max_dist_m)))
 
+    def _march_table(self) -> np.ndarray:
+        """The beam model's march table, refreshed (by region) when the map changes."""
+        from gatmo.maps.raycast import march_table, update_march_table
+
+        f = self.field
+        key = (id(f.grid.cells), f.grid.cells.shape)
+        if self._march is None or self._march_key != key:
+            self._march = march_table(f.grid)
+            self._march_version = f.version
+            self._march_key = key
+        elif self._march_version != f.version:
+            missed = f.version - self._march_version
+            if missed > len(f.changed_windows):
+                self._march = march_table(f.grid)
+            else:
+                for win in f.changed_windows[-missed:]:
+                    update_march_table(self._march, f.grid, win)
+            self._march_version = f.version
+        return self._march
+
+    def _range_lut(self, rmax: float):
+        """The beam model's range table (ray_caster "lut"); rebuilt when the map changes."""
+        from gatmo.maps.raycast import RangeTable
+
+        f = self.field
+        key = (id(f.grid.cells), f.grid.cells.shape, f.version, rmax)
+        if self._lut is None or self._lut_key != key:
+            self._lut = RangeTable(f.grid, rmax, march=self._march_table())
+            self._lut_key = key
+        return self._lut
+
+    def _beam(self, parts, lp, ranges, angles, rmax):
+        """p = 1 + sum pz^3 (N,) of the beam model with the selected ray caster."""
+        from gatmo.localization import _kernels as K
+        from gatmo.maps.raycast import MARCH_JUMP_MIN_CELLS
+
+        c = self.cfg
+        g = self.field.grid
+        ox, oy = g.origin_xytheta[:2]
+        if self.ray_caster not in self.RAY_CASTERS:
+            raise ValueError(f"ray_caster must be one of {self.RAY_CASTERS}, "
+                             f"got {self.ray_caster!r}")
+        par = len(parts) * len(ranges) >= self.PARALLEL_MIN_EVALS[self.ray_caster]
+        if self.ray_caster == "dda":
+            return K.beam_kernel(parts, lp, ranges, angles, g.cells, g.resolution_m, ox, oy,
+                                 c.z_hit, c.z_short, c.z_max, c.z_rand, c.sigma_hit_m,
+                                 c.lambda_short, rmax)
+        short = c.z_short * c.lambda_short * np.exp(-c.lambda_short * ranges)
+        const = np.where(ranges >= rmax, c.z_max, c.z_rand / rmax)
+        ca = np.cos(angles)
+        sa = np.sin(angles)
+        if self.ray_caster == "lut":
+            lut = self._range_lut(rmax)
+            kern = K.beam_lut_kernel if par else K.beam_lut_kernel_serial
+            return kern(parts, lp, ranges, angles, ca, sa, short, const, lut.index, lut.ranges,
+                        lut.scale_cells, g.resolution_m, ox, oy, c.z_hit, c.sigma_hit_m, rmax)
+        kern = K.beam_march_kernel if par else K.beam_march_kernel_serial
+        return kern(parts, lp, ranges, ca, sa, short, const, self._march_table(),
+                    g.resolution_m, ox, oy, c.z_hit, c.sigma_hit_m, rmax, MARCH_JUMP_MIN_CELLS)
+
     def weigh(self, particles: np.ndarray, scan: Scan, converged: bool) -> tuple[np.ndarray, int]:
         """Log weights (N,) and the number of beams used (0: nothing to weigh)."""
         from gatmo.localization import _kernels as K
@@ -113,15 +186,14 @@ class SensorModel:
         parts = np.ascontiguousarray(particles, dtype=np.float64)
         if c.laser_model == "likelihood_field":
             table, off = self._pz3_table(rmax)
-            p = K.likelihood_table_kernel(parts, lp, ranges * np.cos(angles),
+            par = len(parts) * len(ranges) >= self.PARALLEL_MIN_EVALS["field"]
+            kern = K.likelihood_table_kernel if par else K.likelihood_table_kernel_serial
+            p = kern(parts, lp, ranges * np.cos(angles),
                                           ranges * np.sin(angles), table, g.resolution_m, ox,
                                           oy, off)
             return np.log(p), len(ranges)
         if c.laser_model == "beam":
-            p = K.beam_kernel(parts, lp, ranges, angles, g.cells, g.resolution_m, ox, oy,
-                              c.z_hit, c.z_short, c.z_max, c.z_rand, c.sigma_hit_m,
-                              c.lambda_short, rmax)
-            return np.log(p), len(ranges)
+            return np.log(self._beam(parts, lp, ranges, angles, rmax)), len(ranges)
         use = np.ones(len(ranges), dtype=np.bool_)
         logp, zs = K.likelihood_field_prob_kernel(parts, lp, ranges, angles, self.field.dist_m,
                                                   g.resolution_m, ox, oy,

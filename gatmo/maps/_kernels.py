@@ -135,3 +135,162 @@ def traverse_rays_kernel(cells_shape_h, cells_shape_w, res, ox, oy, x0, y0, ends
             t, ix, iy, t_max_x, t_max_y = _dda_step(ix, iy, t_max_x, t_max_y, step_x, step_y,
                                                     t_dx, t_dy)
     return out[:k].copy(), idx[:k].copy()
+
+
+# ------------------------------------------------------------------ distance-field ray marching
+@njit(cache=True, inline="always")
+def _march_one(sd, gx, gy, dx, dy, max_t, jump_min):
+    """Exact range, in cells, from grid point (gx, gy) along unit (dx, dy) to the entry of the
+    first blocking cell; ``max_t`` when the ray leaves the grid or reaches ``max_t`` first.
+
+    ``sd`` (H, W) float32 is a march table (:func:`gatmo.maps.raycast.march_table`): < 0 on a
+    blocking cell, else a distance [cells] that any ray starting anywhere in that cell (boundary
+    included) travels without touching a blocking cell. Where it is >= ``jump_min`` the ray
+    jumps by it (sphere tracing on the distance transform); elsewhere it walks cell by cell
+    (Amanatides-Woo), so the hit is found by the cell walk and is exact, as :func:`_cast_one`.
+    """
+    h, w = sd.shape
+    ix = int(np.floor(gx))
+    iy = int(np.floor(gy))
+    if ix < 0 or iy < 0 or ix >= w or iy >= h:
+        return max_t
+    v = sd[iy, ix]
+    if v < 0:
+        return 0.0
+    big = 1e30
+    step_x = 1 if dx > 0 else -1
+    step_y = 1 if dy > 0 else -1
+    inv_x = 1.0 / dx if dx != 0.0 else 0.0
+    inv_y = 1.0 / dy if dy != 0.0 else 0.0
+    t_dx = abs(inv_x) if dx != 0.0 else big
+    t_dy = abs(inv_y) if dy != 0.0 else big
+    t = 0.0
+    px = gx
+    py = gy
+    while True:
+        if v >= jump_min:
+            t += v
+            if t >= max_t:
+                return max_t
+            px = gx + t * dx
+            py = gy + t * dy
+            ix = int(np.floor(px))
+            iy = int(np.floor(py))
+            if ix < 0 or iy < 0 or ix >= w or iy >= h:
+                return max_t
+            v = sd[iy, ix]
+            continue
+        # cell walk from (px, py) at distance t inside cell (ix, iy)
+        t_max_x = t + ((ix + 1 if dx > 0 else ix) - px) * inv_x if dx != 0.0 else big
+        t_max_y = t + ((iy + 1 if dy > 0 else iy) - py) * inv_y if dy != 0.0 else big
+        while True:
+            if t_max_x < t_max_y:
+                t = t_max_x
+                ix += step_x
+                t_max_x += t_dx
+            else:
+                t = t_max_y
+                iy += step_y
+                t_max_y += t_dy
+            if t >= max_t:
+                return max_t
+            if ix < 0 or iy < 0 or ix >= w or iy >= h:
+                return max_t
+            v = sd[iy, ix]
+            if v < 0:
+                return t
+            if v >= jump_min:
+                px = gx + t * dx
+                py = gy + t * dy
+                break
+
+
+@njit(cache=True, parallel=True)
+def cast_rays_march_kernel(sd, res, ox, oy, poses, angles, max_range, jump_min):
+    """(P, B) ranges [m] by :func:`_march_one`, same as :func:`cast_rays_many_kernel`."""
+    p = poses.shape[0]
+    b = angles.shape[0]
+    out = np.empty((p, b))
+    inv = 1.0 / res
+    max_t = max_range * inv
+    for i in prange(p):
+        gx = (poses[i, 0] - ox) * inv
+        gy = (poses[i, 1] - oy) * inv
+        for j in range(b):
+            a = poses[i, 2] + angles[j]
+            t = _march_one(sd, gx, gy, np.cos(a), np.sin(a), max_t, jump_min)
+            out[i, j] = max_range if t >= max_t else t * res
+    return out
+
+
+# ------------------------------------------------------------------ range lookup table
+@njit(cache=True, parallel=True)
+def range_table_build_kernel(sd, index, rows_ix, rows_iy, bins, max_t, scale_cells, jump_min):
+    """(R, bins) uint16 ranges from the centre of each listed cell at headings 2 pi k / bins,
+    in units of ``scale_cells`` cells, by :func:`_march_one`; 65535 = no hit within max_t."""
+    r = rows_ix.shape[0]
+    out = np.empty((r, bins), dtype=np.uint16)
+    ca = np.cos(2.0 * np.pi * np.arange(bins) / bins)
+    sa = np.sin(2.0 * np.pi * np.arange(bins) / bins)
+    for q in prange(r):
+        gx = rows_ix[q] + 0.5
+        gy = rows_iy[q] + 0.5
+        for k in range(bins):
+            t = _march_one(sd, gx, gy, ca[k], sa[k], max_t, jump_min)
+            if t >= max_t:
+                out[q, k] = 65535
+            else:
+                out[q, k] = min(int(t / scale_cells + 0.5), 65534)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _lut_one(index, ranges, scale_cells, gx, gy, theta, dx, dy, max_t):
+    """Approximate range [cells] from grid point (gx, gy) along heading ``theta`` with unit
+    vector (dx, dy): the table's ranges from the cell centre at the two nearest heading bins,
+    interpolated linearly, then moved by the point's offset from the centre along the ray."""
+    h, w = index.shape
+    ix = int(np.floor(gx))
+    iy = int(np.floor(gy))
+    if ix < 0 or iy < 0 or ix >= w or iy >= h:
+        return max_t
+    row = index[iy, ix]
+    if row < 0:
+        return 0.0
+    bins = ranges.shape[1]
+    u = theta * (bins / (2.0 * np.pi))
+    fl = np.floor(u)
+    f = u - fl
+    k0 = int(fl) % bins
+    k1 = k0 + 1 if k0 + 1 < bins else 0
+    r0 = ranges[row, k0]
+    r1 = ranges[row, k1]
+    if r0 == 65535 or r1 == 65535:
+        # one of the bins sees nothing within range: the nearest bin decides
+        if (r0 if f < 0.5 else r1) == 65535:
+            return max_t
+        t = (r0 if f < 0.5 else r1) * scale_cells
+    else:
+        t = ((1.0 - f) * r0 + f * r1) * scale_cells
+    t -= (gx - ix - 0.5) * dx + (gy - iy - 0.5) * dy
+    if t < 0.0:
+        return 0.0
+    return t if t < max_t else max_t
+
+
+@njit(cache=True, parallel=True)
+def cast_rays_lut_kernel(index, ranges, scale_cells, res, ox, oy, poses, angles, max_range):
+    """(P, B) approximate ranges [m] by :func:`_lut_one`."""
+    p = poses.shape[0]
+    b = angles.shape[0]
+    out = np.empty((p, b))
+    inv = 1.0 / res
+    max_t = max_range * inv
+    for i in prange(p):
+        gx = (poses[i, 0] - ox) * inv
+        gy = (poses[i, 1] - oy) * inv
+        for j in range(b):
+            a = poses[i, 2] + angles[j]
+            t = _lut_one(index, ranges, scale_cells, gx, gy, a, np.cos(a), np.sin(a), max_t)
+            out[i, j] = max_range if t >= max_t else t * res
+    return out
