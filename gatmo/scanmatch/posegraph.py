@@ -1,33 +1,64 @@
-"""A Pose2 pose graph on gtsam: scan-matching odometry between keyframes, loop closures found by
-scan-to-scan ICP with a strict acceptance test, robust (Cauchy) noise so that a wrong closure
-is down-weighted, Levenberg-Marquardt."""
+"""A Pose2 pose graph on gtsam with loop closures, for building maps from raw logs.
+
+Keyframes come from scan-matching odometry (between factors, noise growing with the step). Each
+new keyframe looks for loop closures against earlier parts of the trajectory: candidates are
+earlier keyframes whose current estimate lies within a search radius that grows with the path
+driven between the two (drift); the new keyframe's scan is matched to a submap (a few
+consecutive keyframes merged) by a correlative x-y-theta search on a likelihood field, refined
+by ICP and accepted only by a strict test (:mod:`gatmo.scanmatch.correlative`). Closures enter
+iSAM2 with a Cauchy-robust noise model as soon as they are found, so later searches start from
+corrected poses. A final batch Levenberg-Marquardt pass drops closures that still disagree with
+the graph (residual above a bound) and re-optimizes.
+
+Frames: all poses (x [m], y [m], theta [rad]) are the base frame in the odometry/map frame whose
+origin is the first keyframe; keyframe points (N, 2) are in that keyframe's base frame.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from gatmo.geometry import compose, inverse, relative
-from gatmo.scanmatch.icp import icp_2d, voxel_downsample
+from gatmo.geometry import compose, inverse, relative, wrap_angle
+from gatmo.scanmatch.correlative import (
+    MatchConfig,
+    likelihood_field,
+    match_to_submap,
+    submap_points,
+)
+from gatmo.scanmatch.icp import voxel_downsample
 
 
 @dataclass
 class GraphConfig:
     keyframe_dist_m: float = 0.5
     keyframe_angle_rad: float = 0.35
-    closure_radius_m: float = 3.0
-    closure_min_separation: int = 30  # keyframes apart
-    closure_every: int = 3  # try closures from every n-th keyframe
-    closure_max_per_keyframe: int = 2
-    closure_min_fitness: float = 0.8
-    closure_max_rmse_m: float = 0.06
-    odom_sigma_xy_m: float = 0.05
-    odom_sigma_theta_rad: float = 0.02
+    min_points: int = 30  # keyframes with fewer valid points take no part in closures
+    submap_half_width: int = 4  # keyframes either side merged into a closure target
+    submap_voxel_m: float = 0.05
+    closure_min_separation: int = 20  # keyframes apart
+    closure_every: int = 1  # search closures from every n-th keyframe
+    closure_max_candidates: int = 2  # earlier visits tried per keyframe (nearest first)
+    closure_skip_after_accept: int = 3  # keyframes to wait after an accepted closure
+    window_base_m: float = 0.6  # search half-width at zero path length
+    window_per_m: float = 0.05  # ... growing with the path driven between the two keyframes
+    window_max_m: float = 3.0
+    window_theta_base_rad: float = float(np.radians(6.0))
+    window_theta_per_m: float = float(np.radians(0.5))
+    window_theta_max_rad: float = float(np.radians(25.0))
+    match: MatchConfig = field(default_factory=MatchConfig)
+    odom_sigma_xy_m: float = 0.02
+    odom_sigma_xy_per_m: float = 0.05
+    odom_sigma_theta_rad: float = 0.01
+    odom_sigma_theta_per_rad: float = 0.05
     closure_sigma_xy_m: float = 0.05
     closure_sigma_theta_rad: float = 0.02
-    robust_scale: float = 1.0
+    robust_scale: float = 1.0  # Cauchy kernel scale on the whitened closure error
+    prune_xy_m: float = 0.25  # after optimization, closures off by more are dropped
+    prune_theta_rad: float = float(np.radians(4.0))
 
 
 @dataclass
@@ -35,10 +66,13 @@ class GraphResult:
     keyframes: list[int]  # scan indices
     poses_xytheta: np.ndarray  # optimized keyframe poses (K, 3)
     closures: list[tuple[int, int, np.ndarray]] = field(default_factory=list)
-    rejected: int = 0
+    rejected: int = 0  # closure attempts that failed the acceptance test
+    pruned: int = 0  # accepted closures dropped after optimization (disagree with the graph)
+    stats: dict = field(default_factory=dict)
 
 
 def select_keyframes(poses_xytheta: np.ndarray, cfg: GraphConfig) -> list[int]:
+    """Indices of poses (N, 3) at least ``keyframe_dist_m`` or ``keyframe_angle_rad`` apart."""
     keys = [0]
     for i in range(1, len(poses_xytheta)):
         d = relative(poses_xytheta[keys[-1]], poses_xytheta[i])
@@ -47,66 +81,200 @@ def select_keyframes(poses_xytheta: np.ndarray, cfg: GraphConfig) -> list[int]:
     return keys
 
 
+class PoseGraph:
+    """Incremental pose graph: ``add_keyframe`` per keyframe (odometry pose, points), then
+    ``finish``. Keys are keyframe numbers 0..K-1."""
+
+    def __init__(self, cfg: GraphConfig | None = None) -> None:
+        import gtsam
+
+        self.cfg = cfg or GraphConfig()
+        self._gtsam = gtsam
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(0.01)
+        params.relinearizeSkip = 1
+        self._isam = gtsam.ISAM2(params)
+        self.odom: list[np.ndarray] = []  # odometry poses of keyframes
+        self.points: list[np.ndarray] = []
+        self.est = np.zeros((0, 3))  # current estimate (K, 3)
+        self.path_m: list[float] = []  # cumulative path length at each keyframe
+        self.odom_factors: list[tuple[int, int, np.ndarray, np.ndarray]] = []
+        self.closures: list[tuple[int, int, np.ndarray]] = []
+        self.stats = {"attempts": 0, "accepted": 0, "rejected": 0, "reasons": {}}
+        self._last_accept = -(10**9)
+        base = gtsam.noiseModel.Diagonal.Sigmas(np.array(
+            [self.cfg.closure_sigma_xy_m, self.cfg.closure_sigma_xy_m,
+             self.cfg.closure_sigma_theta_rad]))
+        self._closure_noise = gtsam.noiseModel.Robust.Create(
+            gtsam.noiseModel.mEstimator.Cauchy.Create(self.cfg.robust_scale), base)
+
+    # ------------------------------------------------------------------ building
+    def _odom_noise(self, d: np.ndarray):
+        c = self.cfg
+        sxy = c.odom_sigma_xy_m + c.odom_sigma_xy_per_m * float(np.hypot(d[0], d[1]))
+        sth = c.odom_sigma_theta_rad + c.odom_sigma_theta_per_rad * abs(float(d[2]))
+        return np.array([sxy, sxy, sth])
+
+    def add_keyframe(self, odom_pose_xytheta: np.ndarray, points_xy: np.ndarray,
+                     search: bool = True) -> int:
+        """Add a keyframe at its odometry pose (3,) with its points (N, 2) (base frame);
+        searches loop closures for it if ``search``. Returns its key."""
+        gtsam = self._gtsam
+        k = len(self.odom)
+        pose = np.asarray(odom_pose_xytheta, dtype=float)
+        pts = points_xy if len(points_xy) >= self.cfg.min_points else np.zeros((0, 2))
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        if k == 0:
+            prior = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-3, 1e-3, 1e-4]))
+            graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*pose), prior))
+            guess = pose
+            self.path_m.append(0.0)
+        else:
+            d = relative(self.odom[-1], pose)
+            sig = self._odom_noise(d)
+            self.odom_factors.append((k - 1, k, d, sig))
+            graph.add(gtsam.BetweenFactorPose2(k - 1, k, gtsam.Pose2(*d),
+                                               gtsam.noiseModel.Diagonal.Sigmas(sig)))
+            guess = compose(self.est[-1], d)
+            self.path_m.append(self.path_m[-1] + float(np.hypot(d[0], d[1])))
+        values.insert(k, gtsam.Pose2(*guess))
+        self.odom.append(pose)
+        self.points.append(pts)
+        self.est = np.vstack([self.est, guess[None]])
+        found = []
+        c = self.cfg
+        if (search and len(pts) and k % c.closure_every == 0
+                and k - self._last_accept >= c.closure_skip_after_accept):
+            found = self._search_closures(k)
+        for a, T in found:
+            graph.add(gtsam.BetweenFactorPose2(a, k, gtsam.Pose2(*T), self._closure_noise))
+            self.closures.append((a, k, T))
+        self._isam.update(graph, values)
+        if found:
+            for _ in range(3):
+                self._isam.update()
+            self._refresh()
+        else:
+            p = self._isam.calculateEstimatePose2(k) if hasattr(
+                self._isam, "calculateEstimatePose2") else None
+            if p is not None:
+                self.est[k] = [p.x(), p.y(), p.theta()]
+        return k
+
+    def _refresh(self) -> None:
+        vals = self._isam.calculateEstimate()
+        self.est = np.array([[vals.atPose2(i).x(), vals.atPose2(i).y(), vals.atPose2(i).theta()]
+                             for i in range(len(self.odom))])
+
+    def _windows(self, a: int, b: int) -> tuple[float, float]:
+        c = self.cfg
+        L = self.path_m[b] - self.path_m[a]
+        wxy = min(c.window_base_m + c.window_per_m * L, c.window_max_m)
+        wth = min(c.window_theta_base_rad + c.window_theta_per_m * L, c.window_theta_max_rad)
+        return wxy, wth
+
+    def _candidates(self, b: int) -> list[int]:
+        c = self.cfg
+        last = b - c.closure_min_separation
+        if last < 0:
+            return []
+        d = np.hypot(*(self.est[: last + 1, :2] - self.est[b, :2]).T)
+        L = self.path_m[b] - np.asarray(self.path_m[: last + 1])
+        radius = np.minimum(c.window_base_m + c.window_per_m * L, c.window_max_m)
+        near = np.nonzero((d <= radius) & np.array([len(p) > 0 for p in self.points[: last + 1]]))
+        near = near[0]
+        if len(near) == 0:
+            return []
+        # one candidate per visit (a run of consecutive keyframes), the nearest
+        splits = np.nonzero(np.diff(near) > 2 * c.submap_half_width)[0] + 1
+        visits = [min(run, key=lambda i: d[i]) for run in np.split(near, splits)]
+        visits.sort(key=lambda i: d[i])
+        return visits[: c.closure_max_candidates]
+
+    def _search_closures(self, b: int) -> list[tuple[int, np.ndarray]]:
+        c = self.cfg
+        out = []
+        for a in self._candidates(b):
+            target = submap_points(self.est, self.points, a, c.submap_half_width,
+                                   c.submap_voxel_m)
+            wxy, wth = self._windows(a, b)
+            guess = relative(self.est[a], self.est[b])
+            fieldmap = likelihood_field(target, resolution_m=c.match.field_resolution_m,
+                                        sigma_m=c.match.field_sigma_m, pad_m=wxy + 1.0)
+            m = match_to_submap(self.points[b], target, guess, window_xy_m=wxy,
+                                window_theta_rad=wth, cfg=c.match, field=fieldmap,
+                                target_tree=cKDTree(target))
+            self.stats["attempts"] += 1
+            if m.accepted:
+                self.stats["accepted"] += 1
+                out.append((a, m.T_target_source))
+                self._last_accept = b
+            else:
+                self.stats["rejected"] += 1
+                self.stats["reasons"][m.reason] = self.stats["reasons"].get(m.reason, 0) + 1
+        return out
+
+    # ---------------------------------------------------------------- finishing
+    def _batch(self, closures, init: np.ndarray) -> np.ndarray:
+        gtsam = self._gtsam
+        graph = gtsam.NonlinearFactorGraph()
+        prior = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-3, 1e-3, 1e-4]))
+        graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*self.odom[0]), prior))
+        for a, b, d, sig in self.odom_factors:
+            graph.add(gtsam.BetweenFactorPose2(a, b, gtsam.Pose2(*d),
+                                               gtsam.noiseModel.Diagonal.Sigmas(sig)))
+        for a, b, T in closures:
+            graph.add(gtsam.BetweenFactorPose2(int(a), int(b), gtsam.Pose2(*T),
+                                               self._closure_noise))
+        values = gtsam.Values()
+        for k in range(len(init)):
+            values.insert(k, gtsam.Pose2(*init[k]))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(100)
+        res = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        return np.array([[res.atPose2(k).x(), res.atPose2(k).y(), res.atPose2(k).theta()]
+                         for k in range(len(init))])
+
+    def finish(self, extra_closures: list[tuple[int, int, np.ndarray]] | None = None
+               ) -> GraphResult:
+        """Batch optimization with all closures (plus ``extra_closures`` (a, b, T_a_b) as
+        given), then closures whose residual exceeds the prune bounds are dropped and the graph
+        is optimized again without them."""
+        c = self.cfg
+        closures = self.closures + list(extra_closures or [])
+        if len(self.odom) == 0:
+            return GraphResult([], np.zeros((0, 3)), [], 0, 0, dict(self.stats))
+        init = self.est if not extra_closures else np.array(self.est)
+        poses = self._batch(closures, init)
+        keep = []
+        for a, b, T in closures:
+            e = relative(relative(poses[a], poses[b]), T)
+            if np.hypot(e[0], e[1]) <= c.prune_xy_m and abs(wrap_angle(e[2])) <= c.prune_theta_rad:
+                keep.append((a, b, T))
+        pruned = len(closures) - len(keep)
+        if pruned:
+            poses = self._batch(keep, poses)
+        stats = dict(self.stats, pruned=pruned, keyframes=len(self.odom))
+        return GraphResult(list(range(len(poses))), poses, keep, self.stats["rejected"], pruned,
+                           stats)
+
+
 def optimize(poses_xytheta: np.ndarray, points: list[np.ndarray], cfg: GraphConfig,
-             extra_closures: list[tuple[int, int, np.ndarray]] | None = None) -> GraphResult:
+             extra_closures: list[tuple[int, int, np.ndarray]] | None = None,
+             progress: Callable[[int, int], None] | None = None) -> GraphResult:
     """Optimize keyframe poses (K, 3) (odometry chain) with loop closures between keyframes.
 
-    ``points[k]`` are keyframe k's scan points in its base frame. ``extra_closures`` (a, b,
-    T_a_b) are added as given (tests use them to inject a wrong closure).
+    ``points[k]`` are keyframe k's scan points (N, 2) in its base frame. ``extra_closures``
+    (a, b, T_a_b) are added as given (tests use them to inject a wrong closure).
     """
-    import gtsam
-
+    g = PoseGraph(cfg)
     K = len(poses_xytheta)
-    closures: list[tuple[int, int, np.ndarray]] = []
-    rejected = 0
-    tree = cKDTree(poses_xytheta[:, :2])
-    for b in range(0, K, cfg.closure_every):
-        found = 0
-        for a in sorted(tree.query_ball_point(poses_xytheta[b, :2], cfg.closure_radius_m)):
-            if b - a < cfg.closure_min_separation or found >= cfg.closure_max_per_keyframe:
-                continue
-            if len(points[a]) < 30 or len(points[b]) < 30:
-                continue
-            guess = relative(poses_xytheta[a], poses_xytheta[b])
-            res = None
-            # drift makes the odometry guess poor on loops: coarse-to-fine from a few headings
-            for dth in (0.0, -0.15, 0.15):
-                g = guess + np.array([0.0, 0.0, dth])
-                r1 = icp_2d(points[b], points[a], g, max_corr_dist_m=1.5, max_iter=20)
-                r2 = icp_2d(points[b], points[a], r1.T_target_source, max_corr_dist_m=0.3,
-                            max_iter=30)
-                if res is None or r2.fitness > res.fitness:
-                    res = r2
-            if (not res.degenerate and res.fitness >= cfg.closure_min_fitness
-                    and res.rmse_m <= cfg.closure_max_rmse_m):
-                closures.append((a, b, res.T_target_source))
-                found += 1
-            else:
-                rejected += 1
-    closures += list(extra_closures or [])
-    graph = gtsam.NonlinearFactorGraph()
-    prior = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-3, 1e-3, 1e-4]))
-    graph.add(gtsam.PriorFactorPose2(0, gtsam.Pose2(*poses_xytheta[0]), prior))
-    odo = gtsam.noiseModel.Diagonal.Sigmas(
-        np.array([cfg.odom_sigma_xy_m, cfg.odom_sigma_xy_m, cfg.odom_sigma_theta_rad]))
-    for k in range(1, K):
-        d = relative(poses_xytheta[k - 1], poses_xytheta[k])
-        graph.add(gtsam.BetweenFactorPose2(k - 1, k, gtsam.Pose2(*d), odo))
-    base = gtsam.noiseModel.Diagonal.Sigmas(
-        np.array([cfg.closure_sigma_xy_m, cfg.closure_sigma_xy_m, cfg.closure_sigma_theta_rad]))
-    robust = gtsam.noiseModel.Robust.Create(
-        gtsam.noiseModel.mEstimator.Cauchy.Create(cfg.robust_scale), base)
-    for a, b, T in closures:
-        graph.add(gtsam.BetweenFactorPose2(int(a), int(b), gtsam.Pose2(*T), robust))
-    init = gtsam.Values()
     for k in range(K):
-        init.insert(k, gtsam.Pose2(*poses_xytheta[k]))
-    params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(100)
-    result = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
-    out = np.array([[result.atPose2(k).x(), result.atPose2(k).y(), result.atPose2(k).theta()]
-                    for k in range(K)])
-    return GraphResult(list(range(K)), out, closures, rejected)
+        g.add_keyframe(poses_xytheta[k], points[k])
+        if progress is not None and (k % 20 == 0 or k == K - 1):
+            progress(k + 1, K)
+    return g.finish(extra_closures)
 
 
 def correct_all(poses_xytheta: np.ndarray, keyframes: list[int],
@@ -122,12 +290,12 @@ def correct_all(poses_xytheta: np.ndarray, keyframes: list[int],
 
 
 def build_graph(scans, odometry_poses_xytheta: np.ndarray, cfg: GraphConfig | None = None,
-                voxel_m: float = 0.05):
+                voxel_m: float = 0.05, progress: Callable[[int, int], None] | None = None):
     """Keyframes from scan-matching odometry (N, 3), loop closures, optimization; returns
     (all scan poses (N, 3) after optimization, GraphResult)."""
     cfg = cfg or GraphConfig()
     keys = select_keyframes(odometry_poses_xytheta, cfg)
     pts = [voxel_downsample(scans[i].points_base_xy(), voxel_m) for i in keys]
-    res = optimize(odometry_poses_xytheta[keys], pts, cfg)
+    res = optimize(odometry_poses_xytheta[keys], pts, cfg, progress=progress)
     res.keyframes = keys
     return correct_all(odometry_poses_xytheta, keys, res.poses_xytheta), res
