@@ -1,5 +1,11 @@
-"""numba kernels of the sensor models, parallel over particles. Plain-numpy references are in
-:mod:`gatmo.localization.sensor`; tests check both agree."""
+"""numba kernels of the sensor models, parallel over particles (``*_serial``: the same on the
+calling thread). Plain-numpy references are in :mod:`gatmo.localization.sensor`; tests check both
+agree.
+
+The ray casters are inlined from :mod:`gatmo.maps._kernels`; numba's on-disk cache only notices
+changes to *this* file, so after editing the casters there, delete this module's cache files
+(``__pycache__/_kernels.*.nbi|nbc``) or touch this file.
+"""
 
 from __future__ import annotations
 
@@ -203,16 +209,19 @@ def beam_march_kernel_serial(particles, laser_pose, ranges, ca, sa, short, const
 
 @njit(cache=True, inline="always")
 def _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const, index, table,
-                       scale_cells, inv_res, ox, oy, z_hit, inv_denom, max_t, res, angles_step):
+                       scale_cells, inv_res, ox, oy, z_hit, inv_denom, max_t, res, beam_bins):
     """The beam model's p for particle i, ranges by :func:`_lut_one` (approximate)."""
     lx, ly, lt = _laser_in_map(particles, i, laser_pose)
     lc = np.cos(lt)
     ls = np.sin(lt)
     gx = (lx - ox) * inv_res
     gy = (ly - oy) * inv_res
+    bins = table.shape[1]
+    u0 = lt * (bins / (2.0 * np.pi))
+    u0 -= bins * np.floor(u0 / bins)  # [0, bins); beam_bins in [-bins/2, bins/2)
     p = 1.0
     for j in range(ranges.shape[0]):
-        t = _lut_one(index, table, scale_cells, gx, gy, lt + angles_step[j],
+        t = _lut_one(index, table, scale_cells, gx, gy, u0 + beam_bins[j],
                      lc * ca[j] - ls * sa[j], ls * ca[j] + lc * sa[j], max_t)
         mr = t * res if t < max_t else max_t * res
         z = ranges[j] - mr
@@ -224,10 +233,11 @@ def _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const, i
 
 
 @njit(cache=True, parallel=True)
-def beam_lut_kernel(particles, laser_pose, ranges, angles, ca, sa, short, const, index, table,
+def beam_lut_kernel(particles, laser_pose, ranges, beam_bins, ca, sa, short, const, index, table,
                     scale_cells, res, ox, oy, z_hit, sigma_hit, range_max):
     """:func:`beam_march_kernel` with approximate ranges from a range table
-    (:class:`gatmo.maps.raycast.RangeTable`: ``index``, ``table``, ``scale_cells``). (N,)"""
+    (:class:`gatmo.maps.raycast.RangeTable`: ``index``, ``table``, ``scale_cells``);
+    ``beam_bins`` = beam angles * bins / (2 pi), angles wrapped to [-pi, pi). (N,)"""
     n = particles.shape[0]
     out = np.empty(n)
     inv_res = 1.0 / res
@@ -236,12 +246,12 @@ def beam_lut_kernel(particles, laser_pose, ranges, angles, ca, sa, short, const,
     for i in prange(n):
         out[i] = _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const,
                                     index, table, scale_cells, inv_res, ox, oy, z_hit, inv_denom,
-                                    max_t, res, angles)
+                                    max_t, res, beam_bins)
     return out
 
 
 @njit(cache=True)
-def beam_lut_kernel_serial(particles, laser_pose, ranges, angles, ca, sa, short, const, index,
+def beam_lut_kernel_serial(particles, laser_pose, ranges, beam_bins, ca, sa, short, const, index,
                            table, scale_cells, res, ox, oy, z_hit, sigma_hit, range_max):
     """:func:`beam_lut_kernel` on the calling thread only."""
     n = particles.shape[0]
@@ -252,5 +262,5 @@ def beam_lut_kernel_serial(particles, laser_pose, ranges, angles, ca, sa, short,
     for i in range(n):
         out[i] = _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const,
                                     index, table, scale_cells, inv_res, ox, oy, z_hit, inv_denom,
-                                    max_t, res, angles)
+                                    max_t, res, beam_bins)
     return out

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from gatmo.datasets.types import Scan
+from gatmo.errors import ConfigError
 from gatmo.maps.likelihood import LikelihoodField
 
 
@@ -72,9 +73,11 @@ class SensorModel:
     #: obstacles), "dda" (exact: cell walk all the way, the reference kernel), "lut" (approximate:
     #: ranges precomputed per free cell and heading bin, see :mod:`gatmo.maps.raycast`)
     RAY_CASTERS = ("march", "dda", "lut")
-    #: below this many beam evaluations per update the kernels run on the calling thread: waking
-    #: a second thread costs more than it saves there, and far more when the core is shared
-    PARALLEL_MIN_EVALS = {"march": 40_000, "dda": 20_000, "lut": 400_000, "field": 400_000}
+    #: below this many beam evaluations per update (about 20 ms of work on one thread) the
+    #: kernels run on the calling thread: on a shared 2-core machine waking a second thread
+    #: measured 5-7 ms of stall per call, more than it saves on smaller sets
+    PARALLEL_MIN_EVALS = {"march": 250_000, "dda": 150_000, "lut": 1_000_000,
+                          "field": 4_000_000}
 
     def __init__(self, field: LikelihoodField, cfg, ray_caster: str = "march") -> None:
         self.field = field
@@ -150,8 +153,8 @@ class SensorModel:
         g = self.field.grid
         ox, oy = g.origin_xytheta[:2]
         if self.ray_caster not in self.RAY_CASTERS:
-            raise ValueError(f"ray_caster must be one of {self.RAY_CASTERS}, "
-                             f"got {self.ray_caster!r}")
+            raise ConfigError(f"ray_caster must be one of {self.RAY_CASTERS}, "
+                              f"got {self.ray_caster!r}", field="ray_caster")
         par = len(parts) * len(ranges) >= self.PARALLEL_MIN_EVALS[self.ray_caster]
         if self.ray_caster == "dda":
             return K.beam_kernel(parts, lp, ranges, angles, g.cells, g.resolution_m, ox, oy,
@@ -164,8 +167,9 @@ class SensorModel:
         if self.ray_caster == "lut":
             lut = self._range_lut(rmax)
             kern = K.beam_lut_kernel if par else K.beam_lut_kernel_serial
-            return kern(parts, lp, ranges, angles, ca, sa, short, const, lut.index, lut.ranges,
-                        lut.scale_cells, g.resolution_m, ox, oy, c.z_hit, c.sigma_hit_m, rmax)
+            return kern(parts, lp, ranges, lut.beam_bins(angles), ca, sa, short, const,
+                        lut.index, lut.ranges, lut.scale_cells, g.resolution_m, ox, oy, c.z_hit,
+                        c.sigma_hit_m, rmax)
         kern = K.beam_march_kernel if par else K.beam_march_kernel_serial
         return kern(parts, lp, ranges, ca, sa, short, const, self._march_table(),
                     g.resolution_m, ox, oy, c.z_hit, c.sigma_hit_m, rmax, MARCH_JUMP_MIN_CELLS)

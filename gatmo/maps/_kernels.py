@@ -245,10 +245,12 @@ def range_table_build_kernel(sd, index, rows_ix, rows_iy, bins, max_t, scale_cel
 
 
 @njit(cache=True, inline="always")
-def _lut_one(index, ranges, scale_cells, gx, gy, theta, dx, dy, max_t):
-    """Approximate range [cells] from grid point (gx, gy) along heading ``theta`` with unit
-    vector (dx, dy): the table's ranges from the cell centre at the two nearest heading bins,
-    interpolated linearly, then moved by the point's offset from the centre along the ray."""
+def _lut_one(index, ranges, scale_cells, gx, gy, u, dx, dy, max_t):
+    """Approximate range [cells] from grid point (gx, gy) along the heading of bin coordinate
+    ``u`` = heading * bins / (2 pi) (any real; cheapest in [-bins, 2 bins)) with unit vector
+    (dx, dy): the table's ranges from the cell centre at the two nearest heading bins,
+    interpolated linearly (the nearest bin alone where they differ by more than 4 cells),
+    moved by the point's offset from the centre along the ray."""
     h, w = index.shape
     ix = int(np.floor(gx))
     iy = int(np.floor(gy))
@@ -258,18 +260,25 @@ def _lut_one(index, ranges, scale_cells, gx, gy, theta, dx, dy, max_t):
     if row < 0:
         return 0.0
     bins = ranges.shape[1]
-    u = theta * (bins / (2.0 * np.pi))
     fl = np.floor(u)
     f = u - fl
-    k0 = int(fl) % bins
+    k0 = int(fl)
+    if k0 < 0:
+        k0 += bins
+    elif k0 >= bins:
+        k0 -= bins
+    if k0 < 0 or k0 >= bins:
+        k0 %= bins
     k1 = k0 + 1 if k0 + 1 < bins else 0
     r0 = ranges[row, k0]
     r1 = ranges[row, k1]
-    if r0 == 65535 or r1 == 65535:
-        # one of the bins sees nothing within range: the nearest bin decides
-        if (r0 if f < 0.5 else r1) == 65535:
+    if r0 == 65535 or r1 == 65535 or abs(float(r0) - float(r1)) * scale_cells > 4.0:
+        # a bin sees nothing within range, or the two bins see different obstacles (more than
+        # 4 cells apart): interpolating would invent a range neither sees; the nearest decides
+        rn = r0 if f < 0.5 else r1
+        if rn == 65535:
             return max_t
-        t = (r0 if f < 0.5 else r1) * scale_cells
+        t = rn * scale_cells
     else:
         t = ((1.0 - f) * r0 + f * r1) * scale_cells
     t -= (gx - ix - 0.5) * dx + (gy - iy - 0.5) * dy
@@ -279,18 +288,26 @@ def _lut_one(index, ranges, scale_cells, gx, gy, theta, dx, dy, max_t):
 
 
 @njit(cache=True, parallel=True)
-def cast_rays_lut_kernel(index, ranges, scale_cells, res, ox, oy, poses, angles, max_range):
-    """(P, B) approximate ranges [m] by :func:`_lut_one`."""
+def cast_rays_lut_kernel(index, ranges, scale_cells, res, ox, oy, poses, beam_bins, ca, sa,
+                         max_range):
+    """(P, B) approximate ranges [m] by :func:`_lut_one` for beams at angles a_j given as
+    ``beam_bins`` = a_j * bins / (2 pi) with a_j in [-pi, pi), ``ca`` = cos a_j, ``sa`` = sin a_j
+    (the beam model's arithmetic, so both give the same ranges)."""
     p = poses.shape[0]
-    b = angles.shape[0]
+    b = beam_bins.shape[0]
+    bins = ranges.shape[1]
     out = np.empty((p, b))
     inv = 1.0 / res
     max_t = max_range * inv
     for i in prange(p):
         gx = (poses[i, 0] - ox) * inv
         gy = (poses[i, 1] - oy) * inv
+        lc = np.cos(poses[i, 2])
+        ls = np.sin(poses[i, 2])
+        u0 = poses[i, 2] * (bins / (2.0 * np.pi))
+        u0 -= bins * np.floor(u0 / bins)
         for j in range(b):
-            a = poses[i, 2] + angles[j]
-            t = _lut_one(index, ranges, scale_cells, gx, gy, a, np.cos(a), np.sin(a), max_t)
+            t = _lut_one(index, ranges, scale_cells, gx, gy, u0 + beam_bins[j],
+                         lc * ca[j] - ls * sa[j], ls * ca[j] + lc * sa[j], max_t)
             out[i, j] = max_range if t >= max_t else t * res
     return out

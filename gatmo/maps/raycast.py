@@ -141,7 +141,8 @@ class RangeTable:
     """Precomputed ranges for approximate ray casting (range_libc's lookup table, without CDDT's
     compression): for every non-blocking cell and ``bins`` headings 2 pi k / bins, the exact
     range from the cell centre, uint16 in units of ``scale_m``. A query interpolates the two
-    nearest headings linearly and moves the result by the query point's offset from the cell
+    nearest headings linearly (takes the nearest where they differ by more than 4 cells: an
+    obstacle edge) and moves the result by the query point's offset from the cell
     centre along the ray; error against exact casting: see tests/maps/test_raycast_likelihood.py.
 
     Attributes:
@@ -182,10 +183,17 @@ class RangeTable:
         from gatmo.maps._kernels import cast_rays_lut_kernel
 
         poses = np.ascontiguousarray(np.atleast_2d(poses_xytheta), dtype=np.float64)
-        angles = np.ascontiguousarray(angles_rad, dtype=np.float64)
+        angles = np.asarray(angles_rad, dtype=np.float64)
         ox, oy = grid.origin_xytheta[:2]
         return cast_rays_lut_kernel(self.index, self.ranges, self.scale_cells,
-                                    grid.resolution_m, ox, oy, poses, angles, self.max_range_m)
+                                    grid.resolution_m, ox, oy, poses, self.beam_bins(angles),
+                                    np.cos(angles), np.sin(angles), self.max_range_m)
+
+    def beam_bins(self, angles_rad: np.ndarray) -> np.ndarray:
+        """Beam angles as bin coordinates, wrapped to [-bins/2, bins/2), for the kernels."""
+        bins = self.ranges.shape[1]
+        a = np.mod(np.asarray(angles_rad, dtype=np.float64) + np.pi, 2 * np.pi) - np.pi
+        return np.ascontiguousarray(a * (bins / (2 * np.pi)))
 
 
 # --------------------------------------------------------------------------- references
