@@ -13,12 +13,14 @@ FORMATS = ("carmen", "rosbag", "wean")
 def sniff_format(path: str | Path) -> str:
     """carmen | rosbag | wean, from the suffix and the first lines."""
     p = Path(path)
-    if p.is_dir() and (p / "metadata.yaml").exists():
-        return "rosbag"
-    if p.suffix in (".bag", ".db3", ".mcap"):
-        return "rosbag"
     if not p.exists():
         raise FormatError("no such file", file=p)
+    if p.is_dir():
+        if (p / "metadata.yaml").exists():
+            return "rosbag"
+        raise FormatError("a folder without metadata.yaml: not a ROS 2 bag", file=p)
+    if p.suffix in (".bag", ".db3", ".mcap"):
+        return "rosbag"
     try:
         with open(p, "rb") as f:
             head = f.read(2)

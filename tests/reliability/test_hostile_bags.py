@@ -262,7 +262,8 @@ def test_bag_structure(tmp_path, ros1, scan_type, odom, tf, garbage, stamps, ski
     make_bag(p, ros1=ros1, n=6, scan_type=scan_type, odom=odom, tf=tf,
              garbage_scans=tuple(garbage), scan_stamps=stamps)
     out = _outcome(p, skip_bad=skip_bad)
-    expect_ok = scan_type == "sensor_msgs/msg/LaserScan" and odom and (tf or skip_bad)
+    expect_ok = (scan_type == "sensor_msgs/msg/LaserScan" and odom and (tf or skip_bad)
+                 and len(garbage) < 6)  # no readable scan at all is refused even with skip_bad
     if not skip_bad:
         expect_ok = expect_ok and not garbage and (
             stamps is None or (np.all(np.isfinite(stamps)) and np.all(np.diff(stamps) > 0)))
@@ -270,3 +271,12 @@ def test_bag_structure(tmp_path, ros1, scan_type, odom, tf, garbage, stamps, ski
         assert isinstance(out, list) and len(out) >= 1
     else:
         assert isinstance(out, GatmoError) or len(out) < 6
+
+
+def test_open_log_on_missing_paths_and_bare_folders(tmp_path):
+    (tmp_path / "empty").mkdir()
+    for p, text in [(tmp_path / "none.bag", "no such file"), (tmp_path / "none", "no such file"),
+                    (tmp_path / "empty", "without metadata.yaml")]:
+        with pytest.raises(FormatError, match=text) as e:
+            list(open_log(p))
+        assert e.value.file == str(p)
