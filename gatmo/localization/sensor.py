@@ -134,14 +134,25 @@ class SensorModel:
         return self._march
 
     def _range_lut(self, rmax: float):
-        """The beam model's range table (ray_caster "lut"); rebuilt when the map changes."""
+        """The beam model's range table (ray_caster "lut"), refreshed (by region) when the map
+        changes: only the rays that cross a changed window are recast."""
         from gatmo.maps.raycast import RangeTable
 
         f = self.field
-        key = (id(f.grid.cells), f.grid.cells.shape, f.version, rmax)
+        march = self._march_table()
+        key = (id(f.grid.cells), f.grid.cells.shape, rmax)
         if self._lut is None or self._lut_key != key:
-            self._lut = RangeTable(f.grid, rmax, march=self._march_table())
+            self._lut = RangeTable(f.grid, rmax, march=march)
             self._lut_key = key
+            self._lut_version = f.version
+        elif self._lut_version != f.version:
+            missed = f.version - self._lut_version
+            if missed > len(f.changed_windows):
+                self._lut = RangeTable(f.grid, rmax, march=march)
+            else:
+                for win in f.changed_windows[-missed:]:
+                    self._lut.update(f.grid, win, march)
+            self._lut_version = f.version
         return self._lut
 
     def _beam(self, parts, lp, ranges, angles, rmax):

@@ -226,12 +226,18 @@ def cast_rays_march_kernel(sd, res, ox, oy, poses, angles, max_range, jump_min):
 # ------------------------------------------------------------------ range lookup table
 @njit(cache=True, parallel=True)
 def range_table_build_kernel(sd, index, rows_ix, rows_iy, bins, max_t, scale_cells, jump_min):
-    """(R, bins) uint16 ranges from the centre of each listed cell at headings 2 pi k / bins,
-    in units of ``scale_cells`` cells, by :func:`_march_one`; 65535 = no hit within max_t."""
+    """(R, bins) uint16 ranges from the centre of each listed cell at headings
+    2 pi (k + 1/2) / bins (half a bin off the axes and diagonals, where a ray from a centre runs
+    through cell corners), in units of ``scale_cells`` cells, by :func:`_march_one`; 65535 = no
+    hit within max_t."""
     r = rows_ix.shape[0]
     out = np.empty((r, bins), dtype=np.uint16)
-    ca = np.cos(2.0 * np.pi * np.arange(bins) / bins)
-    sa = np.sin(2.0 * np.pi * np.arange(bins) / bins)
+    ca = np.empty(bins)
+    sa = np.empty(bins)
+    for k in range(bins):
+        a = 2.0 * np.pi * (k + 0.5) / bins
+        ca[k] = np.cos(a)
+        sa[k] = np.sin(a)
     for q in prange(r):
         gx = rows_ix[q] + 0.5
         gy = rows_iy[q] + 0.5
@@ -260,6 +266,7 @@ def _lut_one(index, ranges, scale_cells, gx, gy, u, dx, dy, max_t):
     if row < 0:
         return 0.0
     bins = ranges.shape[1]
+    u -= 0.5  # bin k holds heading 2 pi (k + 1/2) / bins
     fl = np.floor(u)
     f = u - fl
     k0 = int(fl)
@@ -311,3 +318,88 @@ def cast_rays_lut_kernel(index, ranges, scale_cells, res, ox, oy, poses, beam_bi
                          lc * ca[j] - ls * sa[j], ls * ca[j] + lc * sa[j], max_t)
             out[i, j] = max_range if t >= max_t else t * res
     return out
+
+
+@njit(cache=True, parallel=True)
+def range_table_update_kernel(sd, ranges, rows_ix, rows_iy, live, max_t, scale_cells,
+                              jump_min, x0, y0, x1, y1):
+    """Recast, in place, every ray of ``ranges`` (rows with ``live``) whose old segment (centre to
+    its stored range) touches the box [x0, x1] x [y0, y1] (grid units, dilated by 0.01): the
+    only rays a change of the cells inside the box can alter. Returns the number recast."""
+    r = ranges.shape[0]
+    bins = ranges.shape[1]
+    eps = 0.01
+    bx0 = x0 - eps
+    by0 = y0 - eps
+    bx1 = x1 + eps
+    by1 = y1 + eps
+    two_pi = 2.0 * np.pi
+    count = np.zeros(r, dtype=np.int64)
+    for q in prange(r):
+        if not live[q]:
+            continue
+        gx = rows_ix[q] + 0.5
+        gy = rows_iy[q] + 0.5
+        inside = bx0 <= gx <= bx1 and by0 <= gy <= by1
+        # nearest distance from the centre to the box: shorter rays cannot reach it
+        ddx = max(bx0 - gx, 0.0, gx - bx1)
+        ddy = max(by0 - gy, 0.0, gy - by1)
+        near = np.sqrt(ddx * ddx + ddy * ddy)
+        if near >= max_t:
+            continue
+        k_lo = 0
+        k_hi = bins - 1
+        if not inside:
+            # headings of the box corners around the heading of its centre: a span < pi
+            ac = np.arctan2(0.5 * (by0 + by1) - gy, 0.5 * (bx0 + bx1) - gx)
+            lo = 0.0
+            hi = 0.0
+            for cx, cy in ((bx0, by0), (bx1, by0), (bx0, by1), (bx1, by1)):
+                d = np.arctan2(cy - gy, cx - gx) - ac
+                d = (d + np.pi) % two_pi - np.pi
+                lo = min(lo, d)
+                hi = max(hi, d)
+            k_lo = int(np.floor((ac + lo) * bins / two_pi - 0.5)) - 1
+            k_hi = int(np.ceil((ac + hi) * bins / two_pi - 0.5)) + 1
+            if k_hi - k_lo >= bins:
+                k_lo = 0
+                k_hi = bins - 1
+        for kk in range(k_lo, k_hi + 1):
+            k = kk % bins
+            old = ranges[q, k]
+            t_old = max_t if old == 65535 else old * scale_cells
+            if not inside:
+                if t_old + eps < near:
+                    continue
+                a = two_pi * (k + 0.5) / bins
+                dx = np.cos(a)
+                dy = np.sin(a)
+                tmin = 0.0
+                tmax = t_old + eps
+                if dx != 0.0:
+                    t1 = (bx0 - gx) / dx
+                    t2 = (bx1 - gx) / dx
+                    tmin = max(tmin, min(t1, t2))
+                    tmax = min(tmax, max(t1, t2))
+                elif gx < bx0 or gx > bx1:
+                    continue
+                if dy != 0.0:
+                    t1 = (by0 - gy) / dy
+                    t2 = (by1 - gy) / dy
+                    tmin = max(tmin, min(t1, t2))
+                    tmax = min(tmax, max(t1, t2))
+                elif gy < by0 or gy > by1:
+                    continue
+                if tmin > tmax:
+                    continue
+            else:
+                a = two_pi * (k + 0.5) / bins
+                dx = np.cos(a)
+                dy = np.sin(a)
+            t = _march_one(sd, gx, gy, dx, dy, max_t, jump_min)
+            if t >= max_t:
+                ranges[q, k] = 65535
+            else:
+                ranges[q, k] = min(int(t / scale_cells + 0.5), 65534)
+            count[q] += 1
+    return count.sum()

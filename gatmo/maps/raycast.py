@@ -139,8 +139,8 @@ def cast_rays_marched(grid: OccupancyGrid, table: np.ndarray, poses_xytheta: np.
 
 class RangeTable:
     """Precomputed ranges for approximate ray casting (range_libc's lookup table, without CDDT's
-    compression): for every non-blocking cell and ``bins`` headings 2 pi k / bins, the exact
-    range from the cell centre, uint16 in units of ``scale_m``. A query interpolates the two
+    compression): for every non-blocking cell and ``bins`` headings 2 pi (k + 1/2) / bins, the
+    exact range from the cell centre, uint16 in units of ``scale_m``. A query interpolates the two
     nearest headings linearly (takes the nearest where they differ by more than 4 cells: an
     obstacle edge) and moves the result by the query point's offset from the cell
     centre along the ray; error against exact casting: see tests/maps/test_raycast_likelihood.py.
@@ -152,26 +152,69 @@ class RangeTable:
         max_range_m: the range the table was built for.
 
     Memory: 2 * bins bytes per free cell (0.7 kB at 360 bins); building casts that many rays.
-    Rebuild it when the map changes.
+    :meth:`update` follows a change of the map's cells in a window by recasting only the rays
+    that cross it.
     """
 
     def __init__(self, grid: OccupancyGrid, max_range_m: float, *, bins: int = 360,
                  stop_at_unknown: bool = True, march: np.ndarray | None = None) -> None:
         from gatmo.maps._kernels import range_table_build_kernel
 
+        self.stop_at_unknown = stop_at_unknown
         sd = march if march is not None else march_table(grid, stop_at_unknown=stop_at_unknown)
         free = sd >= 0
         self.index = np.full(sd.shape, -1, dtype=np.int32)
         iy, ix = np.nonzero(free)
         self.index[iy, ix] = np.arange(len(iy), dtype=np.int32)
+        self.rows_ix = ix.astype(np.int64)
+        self.rows_iy = iy.astype(np.int64)
+        self.live = np.ones(len(ix), dtype=np.bool_)
         self.max_range_m = float(max_range_m)
         self.scale_m = self.max_range_m / 65534.0
         self.resolution_m = grid.resolution_m
-        max_t = self.max_range_m / grid.resolution_m
-        self.ranges = range_table_build_kernel(sd, self.index, ix.astype(np.int64),
-                                               iy.astype(np.int64), int(bins), max_t,
-                                               self.scale_m / grid.resolution_m,
+        self._max_t = self.max_range_m / grid.resolution_m
+        self.ranges = range_table_build_kernel(sd, self.index, self.rows_ix, self.rows_iy,
+                                               int(bins), self._max_t, self.scale_cells,
                                                MARCH_JUMP_MIN_CELLS)
+
+    def update(self, grid: OccupancyGrid, window, march: np.ndarray) -> int:
+        """Follow a change of ``grid.cells`` inside ``window`` = (ix0, iy0, ix1, iy1) (exclusive
+        ends); ``march`` is the march table of the changed grid. Afterwards every query answers
+        as a table built from scratch would. Returns the number of rays recast.
+
+        Cells that became blocking lose their row (it stays allocated, unused); cells that
+        became free get new rows; every other row recasts only its rays whose old segment
+        touches the window.
+        """
+        from gatmo.maps._kernels import range_table_build_kernel, range_table_update_kernel
+
+        x0, y0, x1, y1 = (int(v) for v in window)
+        h, w = self.index.shape
+        x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+        if x1 <= x0 or y1 <= y0:
+            return 0
+        sub_free = march[y0:y1, x0:x1] >= 0
+        sub_idx = self.index[y0:y1, x0:x1]
+        gone = ~sub_free & (sub_idx >= 0)
+        self.live[sub_idx[gone]] = False
+        sub_idx[gone] = -1
+        n = range_table_update_kernel(march, self.ranges, self.rows_ix, self.rows_iy, self.live,
+                                      self._max_t, self.scale_cells, MARCH_JUMP_MIN_CELLS,
+                                      float(x0), float(y0), float(x1), float(y1))
+        iy, ix = np.nonzero(sub_free & (sub_idx < 0))
+        if len(iy):
+            ix = (ix + x0).astype(np.int64)
+            iy = (iy + y0).astype(np.int64)
+            new = range_table_build_kernel(march, self.index, ix, iy, self.ranges.shape[1],
+                                           self._max_t, self.scale_cells, MARCH_JUMP_MIN_CELLS)
+            self.index[iy, ix] = np.arange(len(self.rows_ix), len(self.rows_ix) + len(ix),
+                                           dtype=np.int32)
+            self.rows_ix = np.concatenate([self.rows_ix, ix])
+            self.rows_iy = np.concatenate([self.rows_iy, iy])
+            self.live = np.concatenate([self.live, np.ones(len(ix), dtype=np.bool_)])
+            self.ranges = np.concatenate([self.ranges, new])
+            n += new.size
+        return int(n)
 
     @property
     def scale_cells(self) -> float:

@@ -170,12 +170,14 @@ def test_sensor_model_ray_casters_agree(caster):
             parts, scan, False)
 
 
-def test_march_table_follows_map_changes():
+def test_ray_tables_follow_map_changes():
     grid, scan, parts = _world()
     field = LikelihoodField(grid.copy(), 2.0)
     cfg = AmclConfig(laser_model="beam", z_hit=0.9, z_rand=0.1, max_beams=61)
     model = SensorModel(field, cfg)
     model.weigh(parts, scan, False)
+    lut_model = SensorModel(field, cfg, ray_caster="lut")
+    lut_model.weigh(parts, scan, False)
     for k in range(3):
         patch = np.full((10, 12), 100 if k != 1 else 0, dtype=np.int8)
         field.update_region(patch, 60 + 5 * k, 30)
@@ -184,6 +186,10 @@ def test_march_table_follows_map_changes():
                                                                                 False)
         np.testing.assert_array_equal(got, fresh)
         np.testing.assert_array_equal(model._march, march_table(field.grid))
+        got, _ = lut_model.weigh(parts, scan, False)  # the table follows by region updates
+        fresh, _ = SensorModel(LikelihoodField(field.grid.copy(), 2.0), cfg,
+                               ray_caster="lut").weigh(parts, scan, False)
+        np.testing.assert_array_equal(got, fresh)
     field.set_grid(grid.copy())
     got, _ = model.weigh(parts, scan, False)
     fresh, _ = SensorModel(LikelihoodField(grid.copy(), 2.0), cfg).weigh(parts, scan, False)
