@@ -387,6 +387,31 @@ def map_render(
     _print_mapping("map render", summary.as_dict())
 
 
+# ---------------------------------------------------------------------- map build
+@map_app.command("build")
+def map_build(
+    log: Annotated[Path, typer.Argument(help="Raw log or bag with scans and odometry.")],
+    out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it).")],
+    poses_out: Annotated[
+        Path | None, typer.Option("--poses-out", help="Optimized pose of every scan (TUM).")
+    ] = None,
+    resolution: Annotated[float, typer.Option(help="Cell size [m].")] = 0.05,
+    max_range: Annotated[float, typer.Option(help="Use returns up to this range [m].")] = 20.0,
+    max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
+    fmt: FormatOpt = None,
+) -> None:
+    """Build a map from a raw log: scan-matching odometry, loop closures, a pose graph (gtsam),
+    then log-odds ray tracing at the optimized poses."""
+    from gatmo.pipeline.mapping import build_map
+
+    bar, update = _progress("map build")
+    with bar:
+        summary = build_map(log, out, poses_out=poses_out, resolution_m=resolution,
+                            max_range_m=max_range, fmt=fmt, max_scans=max_scans,
+                            progress=update)
+    _print_mapping("map build", summary.as_dict())
+
+
 # ---------------------------------------------------------------------- entry point
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: run the app, turning GatmoError into one red line and exit code 1."""

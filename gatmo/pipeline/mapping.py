@@ -1,8 +1,12 @@
 """``gatmo map render``: an occupancy map from a log whose poses are known (a SLAM-corrected
-CARMEN log such as the radish ``*-corrected`` logs, or a log with ground truth)."""
+CARMEN log such as the radish ``*-corrected`` logs, or a log with ground truth).
+``gatmo map build``: a map from a raw log, the poses estimated by scan matching and a pose
+graph with loop closures."""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,3 +48,89 @@ def render_reference_map(log: str | Path, out_yaml: str | Path, *, resolution_m:
     save_map(grid, out_yaml, image_format=image_format)
     return RenderSummary(len(scans), src.stats.skipped, f"{grid.width} x {grid.height}",
                          resolution_m, int(grid.occupied.sum()), str(out_yaml))
+
+
+@dataclass
+class BuildSummary:
+    scans: int
+    skipped_records: int  # bad records the reader skipped
+    few_points: int  # scans with too few valid points (odometry used instead of ICP)
+    keyframes: int
+    closures_accepted: int
+    closures_rejected: int  # failed the acceptance test
+    closures_unconfirmed: int  # passed it but no agreeing closures followed
+    closures_pruned: int  # accepted, then dropped: they disagreed with the optimized graph
+    size_cells: str
+    resolution_m: float
+    seconds: float
+    out: str
+    poses_out: str | None
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def build_trajectory(scans, *, icp_cfg=None, graph_cfg=None,
+                     progress: Callable[[int, int], None] | None = None):
+    """Scan-matching odometry then the pose graph with loop closures over ``scans``.
+
+    Returns (ICP odometry poses (N, 3), optimized poses (N, 3), GraphResult, odometry stats).
+    Poses are the base in the frame of the first scan.
+    """
+    from gatmo.scanmatch.odometry import IcpConfig, ScanMatchOdometry
+    from gatmo.scanmatch.posegraph import build_graph
+
+    n = len(scans)
+    total = 2 * n
+    odo = ScanMatchOdometry(icp_cfg or IcpConfig())
+    poses = np.empty((n, 3))
+    for i, s in enumerate(scans):
+        poses[i] = odo.register(s).pose_xytheta
+        if progress is not None and (i % 100 == 0 or i == n - 1):
+            progress(i + 1, total)
+
+    def graph_progress(k: int, kk: int) -> None:
+        if progress is not None:
+            progress(n + int(n * k / max(kk, 1)), total)
+
+    corrected, res = build_graph(scans, poses, graph_cfg, progress=graph_progress)
+    return poses, corrected, res, dict(odo.stats)
+
+
+def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | None = None,
+              resolution_m: float = 0.05, max_range_m: float = 20.0, fmt: str | None = None,
+              image_format: str = "pgm", max_scans: int | None = None,
+              progress: Callable[[int, int], None] | None = None) -> BuildSummary:
+    """``gatmo map build``: a map_server map from a raw log (scans + odometry): scan-matching
+    odometry, loop closures, a gtsam pose graph, then log-odds ray tracing at the optimized
+    poses. ``poses_out`` gets the optimized pose of every scan (TUM, the first scan's frame)."""
+    from gatmo.datasets.open import open_log
+    from gatmo.datasets.tum import write_tum
+    from gatmo.maps.io import save_map
+    from gatmo.maps.mapping import render_map
+
+    t0 = time.perf_counter()
+    src = open_log(log, fmt=fmt, skip_bad=True)
+    scans = []
+    for s in src:
+        scans.append(s)
+        if max_scans is not None and len(scans) >= max_scans:
+            break
+    if len(scans) < 2:
+        raise DataError(f"{len(scans)} scans: too few to build a map", file=log)
+    _, poses, res, odo_stats = build_trajectory(scans, progress=progress)
+    grid = render_map(scans, poses, resolution_m=resolution_m, max_range_m=max_range_m)
+    save_map(grid, out_yaml, image_format=image_format)
+    if poses_out is not None:
+        write_tum(poses_out, np.array([s.stamp_s for s in scans]), poses)
+    if progress is not None:
+        progress(2 * len(scans), 2 * len(scans))
+    st = res.stats
+    return BuildSummary(
+        scans=len(scans), skipped_records=src.stats.skipped,
+        few_points=int(odo_stats.get("fallback_few_points", 0)), keyframes=len(res.keyframes),
+        closures_accepted=len(res.closures), closures_rejected=int(st.get("rejected", 0)),
+        closures_unconfirmed=int(st.get("unconfirmed", 0)), closures_pruned=res.pruned,
+        size_cells=f"{grid.width} x {grid.height}", resolution_m=resolution_m,
+        seconds=round(time.perf_counter() - t0, 1), out=str(out_yaml),
+        poses_out=None if poses_out is None else str(poses_out))

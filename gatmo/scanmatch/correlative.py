@@ -59,6 +59,20 @@ def correlative_scores_reference(field, cells_x, cells_y, offsets_x, offsets_y) 
     return out
 
 
+def block_scores_reference(field, cells_x, cells_y, block_a, block_x0, block_y0, k, n_max):
+    """Plain-numpy twin of :func:`gatmo.scanmatch._kernels.block_scores_kernel`."""
+    out = np.zeros((len(block_a), k, k))
+    for m in range(len(block_a)):
+        a = block_a[m]
+        ox = block_x0[m] + np.arange(k)
+        oy = block_y0[m] + np.arange(k)
+        out[m] = correlative_scores_reference(field, cells_x[a:a + 1], cells_y[a:a + 1], ox,
+                                              oy)[0]
+        out[m][:, ox > n_max] = -1.0
+        out[m][oy > n_max, :] = -1.0
+    return out
+
+
 @dataclass
 class SearchResult:
     """Best pose (3,) of the source in the target frame and its score (mean likelihood, 0..1);
@@ -92,8 +106,10 @@ def correlative_search(source_xy: np.ndarray, field: LikelihoodField, guess_xyth
     first until no bound reaches ``ambiguity_ratio`` times the best score, so every pose
     scoring that high is seen and the second-best peak is exact."""
     if use_kernel:
+        from gatmo.scanmatch._kernels import block_scores_kernel as blocks_of
         from gatmo.scanmatch._kernels import correlative_scores_kernel as scores_of
     else:
+        blocks_of = block_scores_reference
         scores_of = correlative_scores_reference
     guess = np.asarray(guess_xytheta, dtype=float)
     res = field.resolution_m
@@ -108,41 +124,47 @@ def correlative_search(source_xy: np.ndarray, field: LikelihoodField, guess_xyth
     cx = np.floor((px - field.origin_xy[0]) / res).astype(np.int64)
     cy = np.floor((py - field.origin_xy[1]) / res).astype(np.int64)
     bounds = scores_of(_block_max(field.values, k), cx, cy, coarse_offs, coarse_offs)
-    order = np.argsort(bounds, axis=None)[::-1]
     flat = bounds.ravel()
+    cand = np.nonzero(flat > 0)[0]
+    order = cand[np.argsort(flat[cand])[::-1]]
     found = []  # (score, theta index, x offset, y offset)
     best = 0.0
     refined = 0
     exhausted = False
-    for idx in order:
-        if flat[idx] < ambiguity_ratio * best or flat[idx] <= 0:
+    batch = 32
+    pos = 0
+    while pos < len(order):
+        idx = order[pos:pos + batch]
+        idx = idx[flat[idx] >= ambiguity_ratio * best]
+        if len(idx) == 0:
             break
         if refined >= max_refine:
             exhausted = True
             break
-        refined += 1
+        pos += batch
+        refined += len(idx)
         ia, iy, ix = np.unravel_index(idx, bounds.shape)
-        ox = np.arange(coarse_offs[ix], min(coarse_offs[ix] + k, n + 1))
-        oy = np.arange(coarse_offs[iy], min(coarse_offs[iy] + k, n + 1))
-        sc = scores_of(field.values, cx[ia:ia + 1], cy[ia:ia + 1], ox, oy)[0]
-        jy, jx = np.unravel_index(int(np.argmax(sc)), sc.shape)
-        best = max(best, float(sc[jy, jx]))
-        keep = sc >= ambiguity_ratio * best
-        for yy, xx in zip(*np.nonzero(keep), strict=True):
-            found.append((float(sc[yy, xx]), ia, ox[xx], oy[yy]))
-    if not found:
-        return SearchResult(guess.copy(), 0.0, 0.0, refined, exhausted)
-    found.sort(key=lambda f: -f[0])
-    sb, ia, ox, oy = found[0]
-    pose = np.array([guess[0] + ox * res, guess[1] + oy * res, float(wrap_angle(thetas[ia]))])
-    second = 0.0
-    for sc_, ja, jx, jy in found[1:]:
-        far = (np.hypot(jx - ox, jy - oy) * res > ambiguity_radius_m
-               or abs(thetas[ja] - thetas[ia]) > ambiguity_theta_rad)
-        if far:
-            second = sc_
+        x0 = coarse_offs[ix]
+        y0 = coarse_offs[iy]
+        sc = blocks_of(field.values, cx, cy, ia.astype(np.int64), x0.astype(np.int64),
+                       y0.astype(np.int64), k, n)
+        best = max(best, float(sc.max()))
+        mm, jj, ii = np.nonzero(sc >= ambiguity_ratio * best)
+        found.append(np.column_stack([sc[mm, jj, ii], ia[mm], x0[mm] + ii, y0[mm] + jj]))
+        if len(idx) < batch:  # the rest of this batch fell below the bound
             break
-    return SearchResult(pose, sb, second, refined, exhausted)
+    f = np.vstack(found) if found else np.zeros((0, 4))
+    f = f[f[:, 0] >= ambiguity_ratio * best]
+    if len(f) == 0 or best <= 0:
+        return SearchResult(guess.copy(), 0.0, 0.0, refined, exhausted)
+    top = int(np.argmax(f[:, 0]))
+    sb, ia, ox, oy = f[top]
+    ia = int(ia)
+    pose = np.array([guess[0] + ox * res, guess[1] + oy * res, float(wrap_angle(thetas[ia]))])
+    far = ((np.hypot(f[:, 2] - ox, f[:, 3] - oy) * res > ambiguity_radius_m)
+           | (np.abs(thetas[f[:, 1].astype(int)] - thetas[ia]) > ambiguity_theta_rad))
+    second = float(f[far, 0].max()) if far.any() else 0.0
+    return SearchResult(pose, float(sb), second, refined, exhausted)
 
 
 @dataclass
@@ -154,12 +176,12 @@ class MatchConfig:
     search_voxel_m: float = 0.1  # source points are thinned to this for the search
     step_theta_rad: float = float(np.radians(0.7))
     coarse_cells: int = 6
-    min_score: float = 0.5  # mean likelihood of the source points at the best pose
+    min_score: float = 0.4  # mean likelihood of the source points at the best pose
     ambiguity_ratio: float = 0.9  # a second peak scoring this close to the best: ambiguous
     ambiguity_radius_m: float = 0.3  # ... if this far from the best (or ambiguity_theta_rad)
     ambiguity_theta_rad: float = float(np.radians(5.0))
     max_refine: int = 400
-    min_fitness: float = 0.75  # ICP inliers / points
+    min_fitness: float = 0.5  # ICP inliers / points
     max_rmse_m: float = 0.05
     max_icp_shift_m: float = 0.2  # ICP refinement vs search result
     max_range_m: float = 15.0

@@ -37,18 +37,23 @@ class GraphConfig:
     keyframe_dist_m: float = 0.5
     keyframe_angle_rad: float = 0.35
     min_points: int = 30  # keyframes with fewer valid points take no part in closures
-    submap_half_width: int = 4  # keyframes either side merged into a closure target
+    submap_half_width: int = 15  # keyframes either side merged into a closure target
     submap_voxel_m: float = 0.05
     closure_min_separation: int = 20  # keyframes apart
     closure_every: int = 1  # search closures from every n-th keyframe
     closure_max_candidates: int = 2  # earlier visits tried per keyframe (nearest first)
-    closure_skip_after_accept: int = 3  # keyframes to wait after an accepted closure
+    closure_skip_after_accept: int = 1  # keyframes to wait after a confirmed closure
+    closure_max_dist_m: float = 4.0  # a match farther from the submap's centre is refused
+    group_size: int = 3  # a closure enters the graph once this many agree with each other
+    group_span: int = 15  # ... found within this many keyframes
+    group_xy_m: float = 0.3  # agreement: the loop through two closures and odometry closes
+    group_theta_rad: float = float(np.radians(3.0))  # ... within these bounds
     window_base_m: float = 0.6  # search half-width at zero path length
     window_per_m: float = 0.05  # ... growing with the path driven between the two keyframes
-    window_max_m: float = 3.0
+    window_max_m: float = 8.0
     window_theta_base_rad: float = float(np.radians(6.0))
     window_theta_per_m: float = float(np.radians(0.5))
-    window_theta_max_rad: float = float(np.radians(25.0))
+    window_theta_max_rad: float = float(np.radians(35.0))
     match: MatchConfig = field(default_factory=MatchConfig)
     odom_sigma_xy_m: float = 0.02
     odom_sigma_xy_per_m: float = 0.05
@@ -100,11 +105,15 @@ class PoseGraph:
         self.path_m: list[float] = []  # cumulative path length at each keyframe
         self.odom_factors: list[tuple[int, int, np.ndarray, np.ndarray]] = []
         self.closures: list[tuple[int, int, np.ndarray]] = []
-        self.stats = {"attempts": 0, "accepted": 0, "rejected": 0, "reasons": {}}
+        self._pending: list[tuple[int, int, np.ndarray]] = []  # matches awaiting agreement
+        self.stats = {"attempts": 0, "matched": 0, "accepted": 0, "rejected": 0,
+                      "unconfirmed": 0, "reasons": {}}
         self._last_accept = -(10**9)
+        self.attempt_log: list[tuple] = []  # (a, b, window m, window rad, score, reason)
         base = gtsam.noiseModel.Diagonal.Sigmas(np.array(
             [self.cfg.closure_sigma_xy_m, self.cfg.closure_sigma_xy_m,
              self.cfg.closure_sigma_theta_rad]))
+        self._closure_gauss = base  # group-confirmed closures in iSAM2
         self._closure_noise = gtsam.noiseModel.Robust.Create(
             gtsam.noiseModel.mEstimator.Cauchy.Create(self.cfg.robust_scale), base)
 
@@ -146,10 +155,10 @@ class PoseGraph:
         c = self.cfg
         if (search and len(pts) and k % c.closure_every == 0
                 and k - self._last_accept >= c.closure_skip_after_accept):
-            found = self._search_closures(k)
-        for a, T in found:
-            graph.add(gtsam.BetweenFactorPose2(a, k, gtsam.Pose2(*T), self._closure_noise))
-            self.closures.append((a, k, T))
+            found = self._confirm(self._search_closures(k), k)
+        for a, b, T in found:
+            graph.add(gtsam.BetweenFactorPose2(a, b, gtsam.Pose2(*T), self._closure_gauss))
+            self.closures.append((a, b, T))
         self._isam.update(graph, values)
         if found:
             for _ in range(3):
@@ -192,7 +201,46 @@ class PoseGraph:
         visits.sort(key=lambda i: d[i])
         return visits[: c.closure_max_candidates]
 
-    def _search_closures(self, b: int) -> list[tuple[int, np.ndarray]]:
+    def _agree(self, h1, h2) -> bool:
+        """Two closures (a, b, T_a_b) agree if the loop a1 -> b1 -> b2 -> a2 -> a1 (closures
+        plus the current estimate between a1, a2 and between b1, b2) closes."""
+        a1, b1, T1 = h1
+        a2, b2, T2 = h2
+        lhs = compose(T1, relative(self.est[b1], self.est[b2]))
+        rhs = compose(relative(self.est[a1], self.est[a2]), T2)
+        e = relative(lhs, rhs)
+        return bool(np.hypot(e[0], e[1]) <= self.cfg.group_xy_m
+                    and abs(wrap_angle(e[2])) <= self.cfg.group_theta_rad)
+
+    def _confirm(self, new, b: int) -> list[tuple[int, int, np.ndarray]]:
+        """Closures to add now: new matches that agree with enough recent matches (pending or
+        already in the graph), plus the pending ones they agree with."""
+        c = self.cfg
+        recent_added = [h for h in self.closures if b - h[1] <= c.group_span]
+        kept = []
+        for h in self._pending:
+            if b - h[1] <= c.group_span:
+                kept.append(h)
+            else:
+                self.stats["unconfirmed"] += 1
+        self._pending = kept
+        out: list[tuple[int, int, np.ndarray]] = []
+        for h in new:
+            partners = [p for p in self._pending if p[1] != h[1] and self._agree(p, h)]
+            n_added = sum(1 for p in recent_added + out if p[1] != h[1] and self._agree(p, h))
+            if len(partners) + n_added + 1 >= c.group_size:
+                for p in partners:
+                    out.append(p)
+                    self._pending.remove(p)
+                out.append(h)
+            else:
+                self._pending.append(h)
+        if out:
+            self.stats["accepted"] += len(out)
+            self._last_accept = b
+        return out
+
+    def _search_closures(self, b: int) -> list[tuple[int, int, np.ndarray]]:
         c = self.cfg
         out = []
         for a in self._candidates(b):
@@ -206,10 +254,13 @@ class PoseGraph:
                                 window_theta_rad=wth, cfg=c.match, field=fieldmap,
                                 target_tree=cKDTree(target))
             self.stats["attempts"] += 1
+            self.attempt_log.append((a, b, wxy, wth, m.search.score if m.search else 0.0,
+                                     m.reason))
+            if m.accepted and np.hypot(*m.T_target_source[:2]) > c.closure_max_dist_m:
+                m.accepted, m.reason = False, "far from submap"
             if m.accepted:
-                self.stats["accepted"] += 1
-                out.append((a, m.T_target_source))
-                self._last_accept = b
+                self.stats["matched"] += 1
+                out.append((a, b, m.T_target_source))
             else:
                 self.stats["rejected"] += 1
                 self.stats["reasons"][m.reason] = self.stats["reasons"].get(m.reason, 0) + 1
@@ -255,7 +306,8 @@ class PoseGraph:
         pruned = len(closures) - len(keep)
         if pruned:
             poses = self._batch(keep, poses)
-        stats = dict(self.stats, pruned=pruned, keyframes=len(self.odom))
+        stats = dict(self.stats, attempt_log=self.attempt_log, pruned=pruned, unconfirmed=self.stats["unconfirmed"]
+                     + len(self._pending), keyframes=len(self.odom))
         return GraphResult(list(range(len(poses))), poses, keep, self.stats["rejected"], pruned,
                            stats)
 
