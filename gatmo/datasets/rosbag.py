@@ -157,7 +157,8 @@ class RosBag:
     @staticmethod
     def _parse_scan(m):
         t = _stamp(m.header)
-        ranges = np.asarray(m.ranges, dtype=np.float64)
+        with np.errstate(invalid="ignore", over="ignore"):  # garbage values stay as read
+            ranges = np.asarray(m.ranges, dtype=np.float64)
         a0, da = float(m.angle_min), float(m.angle_increment)
         rmin, rmax = float(m.range_min), float(m.range_max)
         _finite("stamp, angles or range limits", t, a0, da, rmin, rmax)

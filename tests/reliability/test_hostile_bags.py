@@ -113,6 +113,31 @@ def test_garbage_messages_are_refused_by_topic_and_index_or_skipped(tmp_path, ro
     assert [r.split(":")[0] for r in bag.stats.skipped_reasons] == ["/scan[3]", "/scan[5]"]
 
 
+def test_ros1_storage_broken_mid_topic_keeps_what_came_before(tmp_path):
+    """A ROS 1 record whose data length is garbage (beyond the end of the chunk): reading stops
+    there. Refused naming the message; with skip_bad the scans before it are kept."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from gatmo.datasets.rosbag import SCAN, _bag_messages
+
+    ss = scans()
+    raw = bytearray(write_ros1_bag(tmp_path / "a.bag", ss).read_bytes())
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    _, scan_msg, _ = _bag_messages(ts, ss, ros1=True, laser_frame="laser",
+                                   base_frame="base_link")
+    at = bytes(raw).find(bytes(ts.serialize_ros1(scan_msg(ss[3]), SCAN)))
+    assert at > 0
+    raw[at - 4 : at] = b"\xff\xff\xff\x7f"  # the record's data length
+    p = tmp_path / "broken.bag"
+    p.write_bytes(bytes(raw))
+    e = _refused(p, FormatError)
+    assert e.field == "/scan[3]" and "cannot read the bag past here" in str(e)
+    bag = RosBag(p, skip_bad=True)
+    out = list(bag)
+    assert [s.stamp_s for s in out] == pytest.approx([10.0, 10.1, 10.2])
+    assert bag.stats.skipped == 1 and bag.stats.skipped_reasons[0].startswith("/scan[3]")
+
+
 @KINDS
 def test_every_scan_garbage_is_refused_even_with_skip_bad(tmp_path, ros1):
     p = make_bag(_path(tmp_path, ros1), ros1=ros1, garbage_scans=tuple(range(8)))
