@@ -306,8 +306,9 @@ class PoseGraph:
         pruned = len(closures) - len(keep)
         if pruned:
             poses = self._batch(keep, poses)
-        stats = dict(self.stats, attempt_log=self.attempt_log, pruned=pruned, unconfirmed=self.stats["unconfirmed"]
-                     + len(self._pending), keyframes=len(self.odom))
+        stats = dict(self.stats, attempt_log=self.attempt_log, pruned=pruned,
+                     unconfirmed=self.stats["unconfirmed"] + len(self._pending),
+                     keyframes=len(self.odom))
         return GraphResult(list(range(len(poses))), poses, keep, self.stats["rejected"], pruned,
                            stats)
 
