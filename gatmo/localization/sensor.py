@@ -76,8 +76,8 @@ class SensorModel:
     #: below this many beam evaluations per update (about 20 ms of work on one thread) the
     #: kernels run on the calling thread: on a shared 2-core machine waking a second thread
     #: measured 5-7 ms of stall per call, more than it saves on smaller sets
-    PARALLEL_MIN_EVALS = {"march": 250_000, "dda": 150_000, "lut": 1_000_000,
-                          "field": 4_000_000}
+    #: ("dda", the reference, is always parallel)
+    PARALLEL_MIN_EVALS = {"march": 250_000, "lut": 1_000_000, "field": 4_000_000}
 
     def __init__(self, field: LikelihoodField, cfg, ray_caster: str = "march") -> None:
         self.field = field
@@ -166,7 +166,7 @@ class SensorModel:
         if self.ray_caster not in self.RAY_CASTERS:
             raise ConfigError(f"ray_caster must be one of {self.RAY_CASTERS}, "
                               f"got {self.ray_caster!r}", field="ray_caster")
-        par = len(parts) * len(ranges) >= self.PARALLEL_MIN_EVALS[self.ray_caster]
+        par = len(parts) * len(ranges) >= self.PARALLEL_MIN_EVALS.get(self.ray_caster, 0)
         if self.ray_caster == "dda":
             return K.beam_kernel(parts, lp, ranges, angles, g.cells, g.resolution_m, ox, oy,
                                  c.z_hit, c.z_short, c.z_max, c.z_rand, c.sigma_hit_m,
@@ -203,9 +203,8 @@ class SensorModel:
             table, off = self._pz3_table(rmax)
             par = len(parts) * len(ranges) >= self.PARALLEL_MIN_EVALS["field"]
             kern = K.likelihood_table_kernel if par else K.likelihood_table_kernel_serial
-            p = kern(parts, lp, ranges * np.cos(angles),
-                                          ranges * np.sin(angles), table, g.resolution_m, ox,
-                                          oy, off)
+            p = kern(parts, lp, ranges * np.cos(angles), ranges * np.sin(angles), table,
+                     g.resolution_m, ox, oy, off)
             return np.log(p), len(ranges)
         if c.laser_model == "beam":
             return np.log(self._beam(parts, lp, ranges, angles, rmax)), len(ranges)
