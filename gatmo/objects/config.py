@@ -30,12 +30,17 @@ class GatmoConfig(GatmoModel):
     absence_min_rays: int = Field(20, ge=1)
     absence_max_range_m: float = Field(6.0, gt=0)
     absence_margin_m: float = Field(0.15, ge=0, description="count only cells this far inside")
-    absence_min_beams: int = Field(4, ge=1, description="beams expected on it for a vote")
     absence_beyond_m: float = Field(0.4, gt=0, description="a return this far beyond = gone")
-    absence_min_votes: int = Field(3, ge=1, description="scans voting gone before absent")
-    min_explained_fraction: float = Field(0.5, ge=0, le=1,
+    hit_tolerance_m: float = Field(0.15, gt=0, description="a return this near = there")
+    absence_min_beams: int = Field(8, ge=1, description="beams through it before absent")
+    absence_through_fraction: float = Field(0.75, gt=0, le=1,
+                                            description="of beams through or on it, through")
+    doubt_min_beams: int = Field(4, ge=1, description="beams through it before in doubt")
+    doubt_fraction: float = Field(0.2, gt=0, le=1)
+    doubt_search_m: float = Field(1.5, gt=0, description="how far a doubted object may shift")
+    confirm_min_beams: int = Field(10, ge=1, description="beams on a movable object: it is there")
+    min_explained_fraction: float = Field(0.3, ge=0, le=1,
                                           description="returns the map explains, else skip")
-    hits_clear_fraction: float = Field(0.2, ge=0, le=1)
     # unexplained returns
     meanshift_bandwidth_m: float = Field(0.35, gt=0)
     min_cluster_points: int = Field(3, ge=1)

@@ -4,6 +4,19 @@ mean shift, metaobjects, matching and relocation, new objects at the end of a ru
 The caller gives the robot's precise pose in the map frame and whether it is confident;
 absence and the tracking of unexplained returns run only while it is (a wrong pose sees through
 everything). Map changes are exposed as region updates for the localizer.
+
+Beyond the paper (each marked where it happens):
+
+* beams are tested against the ranges the current map predicts: a beam that should end on an
+  object but passes well beyond it is evidence the object is gone, one that ends on it is
+  evidence it is there. Alg. 1's seen-through fraction *and* this beam evidence must agree
+  before an object is absent;
+* an object with some pass-through evidence but not enough to be absent is *in doubt*: its
+  returns are no longer explained away by S_free (so a chair hypothesis forms where it now
+  stands) and it is a matching candidate, which is how an object shifted by less than its own
+  size is found;
+* one metaobject may take several clusters of a scan (mean shift splits a sofa), and
+  metaobjects whose evidence grids touch are merged.
 """
 
 from __future__ import annotations
@@ -17,7 +30,6 @@ from scipy import ndimage
 from gatmo.datasets.types import Scan
 from gatmo.geometry import compose, transform_points, wrap_angle
 from gatmo.maps.grid import OccupancyGrid
-from gatmo.maps.likelihood import LikelihoodField
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
 from gatmo.objects.matching import EdgeField, lookalike, match_points
@@ -36,19 +48,27 @@ class Event:
     pose_old: list | None = None
     pose_new: list | None = None
     score: float | None = None
+    support_scans: int | None = None  # scans of the chair hypothesis behind a match (Table II)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
 
 
-def _extents(points_xy: np.ndarray) -> np.ndarray:
-    """Sorted extents (2,) of a point set along its principal axes [m]."""
+def _diameter(points_xy: np.ndarray) -> float:
+    """Largest distance between two points of a set (P, 2) [m]."""
     if len(points_xy) < 2:
-        return np.zeros(2)
-    d = points_xy - points_xy.mean(axis=0)
-    _, _, vt = np.linalg.svd(d, full_matrices=False)
-    proj = d @ vt.T
-    return np.sort(proj.max(axis=0) - proj.min(axis=0))
+        return 0.0
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = points_xy[ConvexHull(points_xy).vertices]
+    except QhullError:  # collinear
+        hull = points_xy
+    d = hull[:, None, :] - hull[None, :, :]
+    return float(np.sqrt((d**2).sum(-1).max()))
+
+
+STRUCTURE = -2  # owner code of walls, columns and specks too small to be objects
 
 
 class GatmoMapper:
@@ -67,20 +87,17 @@ class GatmoMapper:
         self.run = 0
         self._last_stamp = 0.0
         self._grid = object_map.render(self.base)
-        self._explain = LikelihoodField(self._grid.copy(), cfg.delta_W_m + 0.1)
         self._pending: list[tuple[np.ndarray, int, int]] = []
         self._meta: list[Metaobject] = []
         self._next_meta = 1
-        self._seen: dict[int, set] = {}
-        self._rays: dict[int, int] = {}
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
-        self._beam_votes: dict[int, list[int]] = {}  # id -> [scans voting gone, present]
-        self._present_this_run: set[int] = set()  # ids with returns on them this run
+        self._unexplained = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._fields: dict[int, EdgeField] = {}
         self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
-                       "gamma": 0, "persons": 0, "updates": 0}
+                       "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0}
         self._ms: list[float] = []
+        self._reset_run_evidence()
         self._build_owner()
 
     @classmethod
@@ -89,6 +106,13 @@ class GatmoMapper:
         if object_map is None:
             object_map = ObjectMap.from_grid(grid, cfg)
         return cls(object_map, grid, cfg)
+
+    def _reset_run_evidence(self) -> None:
+        self._seen: dict[int, set] = {}  # Alg. 1's I'_i (local cell indices)
+        self._rays: dict[int, int] = {}
+        self._through: dict[int, int] = {}  # beams passing well beyond the object
+        self._hits: dict[int, int] = {}  # beams ending on it
+        self._doubt: set[int] = set()
 
     # ------------------------------------------------------------------ maps
     def grid(self) -> OccupancyGrid:
@@ -120,17 +144,31 @@ class GatmoMapper:
         return core
 
     def _build_owner(self) -> None:
+        """Per cell: which placed object covers it (index into ``object_map.objects``, -1 free,
+        STRUCTURE), its local cell index, and for every cell the owner of the nearest occupied
+        cell with the distance to it (S_free filtering)."""
         g = self._grid
         self._owner = np.full(g.cells.shape, -1, dtype=np.int32)
         self._local = np.full(g.cells.shape, -1, dtype=np.int32)
+        occ = g.occupied
+        self._owner[occ] = STRUCTURE
         for i, o in enumerate(self.object_map.objects):
             if o.status not in ("U", "M") or o.structure:
                 continue
-            c = g.world_to_cell(o.cells_world())
+            c = g.world_to_cell(o.cells_world(dense=True))
             ok = g.in_bounds(c)
-            k = np.nonzero(ok)[0]
-            self._owner[c[ok, 1], c[ok, 0]] = i
-            self._local[c[ok, 1], c[ok, 0]] = k
+            c = c[ok]
+            k = np.repeat(np.arange(len(o.shape_xy)), 4)[ok]
+            keep = occ[c[:, 1], c[:, 0]]
+            self._owner[c[keep, 1], c[keep, 0]] = i
+            self._local[c[keep, 1], c[keep, 0]] = k[keep]
+        if occ.any():
+            dist, (iy, ix) = ndimage.distance_transform_edt(~occ, return_indices=True)
+            self._near_dist = dist * g.resolution_m
+            self._near_owner = self._owner[iy, ix]
+        else:
+            self._near_dist = np.full(g.cells.shape, np.inf)
+            self._near_owner = np.full(g.cells.shape, -1, dtype=np.int32)
 
     def _rerender(self) -> None:
         new = self.object_map.render(self.base)
@@ -142,7 +180,6 @@ class GatmoMapper:
                     continue
                 cells = new.cells[sl].copy()
                 self._pending.append((cells, sl[1].start, sl[0].start))
-                self._explain.update_region(cells, sl[1].start, sl[0].start)
         self._grid = new
         self._build_owner()
 
@@ -150,11 +187,9 @@ class GatmoMapper:
     def begin_run(self, run_id: int) -> None:
         self.run = int(run_id)
         self._meta = []
-        self._seen = {}
-        self._rays = {}
         self._free[:] = 0
-        self._beam_votes = {}
-        self._present_this_run = set()
+        self._unexplained[:] = 0
+        self._reset_run_evidence()
 
     def end_run(self) -> list[Event]:
         """Dominant chairs seen this run and never matched become new objects (in M)."""
@@ -179,7 +214,6 @@ class GatmoMapper:
         self._rerender()
         return events
 
-
     # ---------------------------------------------------------------- update
     def update(self, pose_xytheta, scan: Scan, *, pose_confident: bool,
                stamp_s: float) -> list[Event]:
@@ -193,18 +227,41 @@ class GatmoMapper:
             return events
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
-        far = self._explain.distance_at(pts) > self.cfg.delta_W_m
-        if len(pts) and 1.0 - far.mean() < self.cfg.min_explained_fraction:
+        near_any, explained = self._explained(pts)
+        if len(pts) and near_any.mean() < self.cfg.min_explained_fraction:
             # most returns off the map: the pose is wrong however confident the filter is
-            self.counts["skipped_poor_fit"] = self.counts.get("skipped_poor_fit", 0) + 1
+            self.counts["skipped_poor_fit"] += 1
             self._expire(stamp_s, events)
             return events
         self._absence(lp, scan, pts, stamp_s, events)
-        unexplained = pts[far]
-        self._track(unexplained, stamp_s, events)
+        if events:  # the map changed: explain against the new one
+            near_any, explained = self._explained(pts)
+        un = pts[~explained]
+        cu = self._grid.world_to_cell(un)
+        ok = self._grid.in_bounds(cu)
+        np.add.at(self._unexplained, (cu[ok, 1], cu[ok, 0]), 1)
+        self._track(un, stamp_s, events)
         self._expire(stamp_s, events)
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
+
+    def _explained(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(near any occupied cell, explained) per point (N,). S_free filtering (paper,
+        Sec. IV-B): returns within delta_W of the map are explained, except near an object in
+        doubt (beyond the paper: so that the chair hypothesis sees where it stands now)."""
+        g = self._grid
+        c = g.world_to_cell(pts)
+        ok = g.in_bounds(c)
+        near = np.ones(len(pts), dtype=bool)
+        owner = np.full(len(pts), STRUCTURE, dtype=np.int32)
+        near[ok] = self._near_dist[c[ok, 1], c[ok, 0]] <= self.cfg.delta_W_m
+        owner[ok] = self._near_owner[c[ok, 1], c[ok, 0]]
+        explained = near.copy()
+        if self._doubt:
+            objs = self.object_map.objects
+            doubted = np.array([i >= 0 and objs[i].id in self._doubt for i in owner], dtype=bool)
+            explained &= ~doubted
+        return near, explained
 
     # Algorithm 1, with hits clearing seen-through marks (beyond the paper)
     def _absence(self, lp, scan, pts, stamp_s, events) -> None:
@@ -225,123 +282,185 @@ class GatmoMapper:
         if len(ends) == 0:
             return
         cells, ray = traverse_rays(g, lp[:2], ends, exclude_end_m=c.absence_exclude_end_m)
-        if len(cells) == 0:
-            return
-        # free space seen this run: a relocation may not put an object there
-        np.add.at(self._free, (cells[:, 1], cells[:, 0]), 1)
-        own = self._owner[cells[:, 1], cells[:, 0]]
+        objs = self.object_map.objects
+        if len(cells):
+            # free space seen this run: a relocation may not put an object there
+            np.add.at(self._free, (cells[:, 1], cells[:, 0]), 1)
+            own = self._owner[cells[:, 1], cells[:, 0]]
+            sel = own >= 0
+            for i in np.unique(own[sel]):
+                o = objs[int(i)]
+                m = own == i
+                seen = self._seen.setdefault(o.id, set())
+                seen.update(self._local[cells[m, 1], cells[m, 0]].tolist())
+                self._rays[o.id] = self._rays.get(o.id, 0) + len(np.unique(ray[m]))
         hit_cells = g.world_to_cell(pts)
         okh = g.in_bounds(hit_cells)
         # a return is stronger evidence than rays passing: cells with returns are not free
         self._free[hit_cells[okh, 1], hit_cells[okh, 0]] = 0
         hit_own = self._owner[hit_cells[okh, 1], hit_cells[okh, 0]]
         hit_loc = self._local[hit_cells[okh, 1], hit_cells[okh, 0]]
-        sel = own >= 0
-        objs = self.object_map.objects
-        for i in np.unique(own[sel]):
-            o = objs[int(i)]
-            m = own == i
-            seen = self._seen.setdefault(o.id, set())
-            seen.update(self._local[cells[m, 1], cells[m, 0]].tolist())
-            self._rays[o.id] = self._rays.get(o.id, 0) + len(np.unique(ray[m]))
         for i in np.unique(hit_own[hit_own >= 0]):
             o = objs[int(i)]
             o.seen_count += 1
-            self._present_this_run.add(o.id)
             if o.id in self._seen:  # returns on the object: those cells are there
                 self._seen[o.id].difference_update(hit_loc[hit_own == i].tolist())
-        votes = self._vote_beams(lp, scan)
+        touched = self._beam_evidence(lp, scan)
         gone = []
-        for i in np.unique(own[sel]):
-            o = objs[int(i)]
+        for oid in touched:
+            o = self.object_map.by_id.get(oid)
+            if o is None or o.status not in ("U", "M") or o.structure:
+                continue
+            through, hits = self._through.get(oid, 0), self._hits.get(oid, 0)
+            if through >= c.doubt_min_beams and through >= c.doubt_fraction * (through + hits):
+                self._doubt.add(oid)
             core = self._core(o)
-            frac = len(self._seen.get(o.id, set()) & core) / max(len(core), 1)
-            if frac > c.beta_thresh and self._rays.get(o.id, 0) >= c.absence_min_rays:
-                v = votes.get(o.id, [0, 0])
-                if v[0] >= c.absence_min_votes and v[0] > 2 * v[1]:
-                    gone.append(o)
-        for o in gone:  # after the loop: marking re-renders and may re-index the objects
+            frac = len(self._seen.get(oid, set()) & core) / max(len(core), 1)
+            if (frac > c.beta_thresh and self._rays.get(oid, 0) >= c.absence_min_rays
+                    and through >= c.absence_min_beams
+                    and through >= c.absence_through_fraction * (through + hits)):
+                gone.append(o)
+        for o in gone:  # after the loop: marking re-renders and re-indexes the owner grid
             if o.status in ("U", "M"):
                 self._mark_absent(o, stamp_s, events)
 
-    def _vote_beams(self, lp, scan) -> dict[int, list[int]]:
-        """Beyond Alg. 1, robust to pose errors of a cell or two: per scan, the beams the map
-        says should end on an object either pass well beyond it (a vote for gone) or end near
-        it (a vote for present). Returns the run's votes per object id."""
+    def _beam_evidence(self, lp, scan) -> set[int]:
+        """Beyond Alg. 1, robust to pose errors of a cell or two: the beams the current map says
+        should end on an object either pass well beyond it (evidence it is gone) or end on it
+        (evidence it is there); beams ending short of it (occluded) say nothing. Adds to the
+        run's counts per object id; returns the ids touched by this scan."""
         c = self.cfg
         g = self._grid
         expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
-        r = np.where(np.isfinite(scan.ranges_m), scan.ranges_m, scan.range_max_m)
-        hit = expected < scan.range_max_m
-        ends = lp[:2] + (expected[:, None] + g.resolution_m / 2) * np.stack(
-            [np.cos(lp[2] + scan.angles_rad), np.sin(lp[2] + scan.angles_rad)], axis=1)
+        r = scan.ranges_m
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(r) & (r >= scan.range_min_m)
+        r = np.where(valid, np.minimum(r, scan.range_max_m), 0.0)
+        hit = valid & (expected < scan.range_max_m)
+        u = np.stack([np.cos(lp[2] + scan.angles_rad), np.sin(lp[2] + scan.angles_rad)], axis=1)
+        ends = lp[:2] + (expected[:, None] + g.resolution_m / 2) * u
         cells = g.world_to_cell(ends)
         ok = hit & g.in_bounds(cells)
         own = np.full(len(r), -1)
         own[ok] = self._owner[cells[ok, 1], cells[ok, 0]]
         objs = self.object_map.objects
+        through = r > expected + c.absence_beyond_m
+        on = np.abs(r - expected) <= c.hit_tolerance_m
+        touched = set()
         for i in np.unique(own[own >= 0]):
             m = own == i
-            if m.sum() < c.absence_min_beams:
-                continue
-            through = np.mean(r[m] > expected[m] + c.absence_beyond_m)
-            v = self._beam_votes.setdefault(objs[int(i)].id, [0, 0])
-            if through >= 0.7:
-                v[0] += 1
-            elif through <= 0.3:
-                v[1] += 1
-        return self._beam_votes
+            oid = objs[int(i)].id
+            touched.add(oid)
+            self._through[oid] = self._through.get(oid, 0) + int(np.sum(through[m]))
+            self._hits[oid] = self._hits.get(oid, 0) + int(np.sum(on[m]))
+        return touched
+
+    def _clear_evidence(self, oid: int) -> None:
+        for d in (self._seen, self._rays, self._through, self._hits):
+            d.pop(oid, None)
+        self._doubt.discard(oid)
 
     def _mark_absent(self, o: MapObject, stamp_s, events) -> None:
         o.status = "A"
         o.record(self.run, stamp_s)
-        self._beam_votes.pop(o.id, None)
-        self._seen.pop(o.id, None)
-        self._rays.pop(o.id, None)
+        self._clear_evidence(o.id)
         events.append(Event(float(stamp_s), self.run, "absent", o.id, o.label,
                             o.pose_xytheta.tolist(), None))
         self.counts["absent"] += 1
         self._rerender()
         # order does not matter: an absence may match a chair seen before it
         for m in self._meta:
+            if o.status != "A":
+                break
             if m.matched_object is None and m.dominant() == "chair":
-                self._try_match(m, stamp_s, events, only=[o])
+                self._try_match(m, stamp_s, events)
         for g in list(self.object_map.Gamma):
+            if o.status != "A":
+                break
             self._try_match_gamma(g, o, stamp_s, events)
 
     # ---------------------------------------------------------- metaobjects
     def _track(self, pts, stamp_s, events) -> None:
         c = self.cfg
+        for m in self._meta:
+            m.predict(stamp_s)
         if len(pts) < c.min_cluster_points:
             return
         centres, labels = mean_shift(pts, c.meanshift_bandwidth_m)
-        for m in self._meta:
-            m.predict(stamp_s)
-        used: set[int] = set()
+        assigned: dict[int, list[np.ndarray]] = {}
+        fresh: list[np.ndarray] = []
         for k in range(len(centres)):
             z = pts[labels == k]
             if len(z) < c.min_cluster_points:
                 continue
             best, best_lp = None, len(z) * np.log(c.beta_min_prob)  # m_new
+            zc = z.mean(axis=0)
             for m in self._meta:
-                if m.id in used or np.hypot(*(m.kf.x[:2] - z.mean(axis=0))) > c.gate_m:
+                if np.hypot(*(m.kf.x[:2] - zc)) > c.gate_m and not m.near(z, c.gate_m / 3):
                     continue
                 lp = m.log_p(z)
                 if lp > best_lp:
                     best, best_lp = m, lp
             if best is None:
-                best = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m)
-                self._next_meta += 1
-                self._meta.append(best)
-            else:
-                best.update(z, stamp_s)
-            used.add(best.id)
-            if (best.matched_object is None and best.n_obs >= c.chair_min_scans
-                    and best.n_obs % 3 == 0 and best.dominant() == "chair"):
-                self._try_match(best, stamp_s, events)
+                fresh.append(z)
+            else:  # beyond the paper: several clusters may belong to one (large) object
+                assigned.setdefault(best.id, []).append(z)
+        by_id = {m.id: m for m in self._meta}
+        touched = []
+        for mid, zs in assigned.items():
+            m = by_id[mid]
+            m.update(np.vstack(zs), stamp_s)
+            touched.append(m)
+        for z in fresh:
+            m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m)
+            self._next_meta += 1
+            self._meta.append(m)
+        self._merge_metaobjects()
+        for m in touched:
+            if m not in self._meta:
+                continue
+            if (m.matched_object is None and m.n_obs >= c.chair_min_scans
+                    and m.n_obs % 3 == 0 and m.dominant() == "chair"):
+                self._try_match(m, stamp_s, events)
 
-    def _candidates(self) -> list[MapObject]:
-        return [o for o in self.object_map.A if not o.structure]
+    def _merge_metaobjects(self) -> None:
+        """Chair-like metaobjects whose evidence grids touch are one object seen in parts."""
+        metas = [m for m in self._meta if m.dominant() != "person"]
+        gone: set[int] = set()
+        for a_i, a in enumerate(metas):
+            if a.id in gone:
+                continue
+            for b in metas[a_i + 1:]:
+                if b.id in gone or a.matched_object is not None and b.matched_object is not None:
+                    continue
+                if a.touches(b):
+                    a.absorb(b)
+                    gone.add(b.id)
+        if gone:
+            self._meta = [m for m in self._meta if m.id not in gone]
+
+    def _candidates(self, pts: np.ndarray) -> list[tuple[int, MapObject]]:
+        """(tier, object) pairs a chair may be: absent ones (paper), placed ones near it that
+        are in doubt or not yet seen at their place this run (a shift), both tier 0; movable
+        ones elsewhere not seen at their place this run (paper: A and M), tier -1."""
+        c = pts.mean(axis=0)
+        out = []
+        for o in self.object_map.objects:
+            if o.structure:
+                continue
+            if o.status == "A":
+                out.append((0, o))
+                continue
+            if o.status not in ("U", "M"):
+                continue
+            confirmed = (self._hits.get(o.id, 0) >= self.cfg.confirm_min_beams
+                         and o.id not in self._doubt)
+            near = np.hypot(*(o.pose_xytheta[:2] - c)) < self.cfg.doubt_search_m + o.extent_m()
+            if near and not confirmed:
+                out.append((0, o))
+            elif o.status == "M" and not confirmed:
+                out.append((-1, o))
+        return out
 
     def _field(self, o: MapObject) -> EdgeField:
         f = self._fields.get(o.id)
@@ -355,18 +474,32 @@ class GatmoMapper:
             return False
         best = None
         rivals: list = []
-        ext_p = _extents(pts)
-        for o in only if only is not None else self._candidates():
-            ext_o = _extents(o.shape_xy)
-            if np.any(ext_p > ext_o + 3 * o.resolution_m):
+        diam_p = _diameter(pts)
+        cands = [(0, o) for o in only] if only is not None else self._candidates(pts)
+        everything = m.chair_points(min_count=1, min_fraction=0.0)
+        for tier, o in cands:
+            if tier < 0 and m.n_obs < self.cfg.match_patience_scans:
+                continue  # a movable object seen nowhere yet: only once nothing absent fits
+            if diam_p > _diameter(o.shape_xy) + 3 * o.resolution_m:
                 continue  # what is seen is larger than the object
             if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
                 continue  # too little of the object seen yet to tell look-alikes apart
-            mt = match_points(pts, o, self.cfg, self._field(o), prior_yaw=o.pose_xytheta[2])
+            field = self._field(o)
+            mt = match_points(pts, o, self.cfg, field, prior_yaw=o.pose_xytheta[2])
             if mt.score < self.cfg.match_min_score or not self._free_consistent(o, mt):
                 continue
+            # every return the track ever had must fit too, or this is a part of something
+            # larger (a desk's corner looks like a footstool's)
+            R = np.array([[np.cos(mt.pose_xytheta[2]), -np.sin(mt.pose_xytheta[2])],
+                          [np.sin(mt.pose_xytheta[2]), np.cos(mt.pose_xytheta[2])]])
+            if field.score((everything - mt.pose_xytheta[:2]) @ R) < \
+                    self.cfg.match_min_score - 0.15:
+                continue
+            if self._part_of_larger(o, mt):
+                continue
             dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
-            key = (round(mt.score * 20) / 20, -dist)  # look-alikes: prefer the nearest one
+            # tier first; look-alikes: prefer the nearest one
+            key = (tier, round(mt.score * 20) / 20, -dist)
             rivals.append((key, o, mt))
             if best is None or key > best[0]:
                 best = (key, o, mt)
@@ -377,20 +510,35 @@ class GatmoMapper:
         if patient and only is None:
             # a different-looking candidate nearly as good: wait for more of the object
             for k2, o2, _ in rivals:
-                if o2 is not o and k2[0] >= best[0][0] - 0.05 and not lookalike(
-                        o2, o, self.cfg.lookalike_tolerance):
+                if (o2 is not o and k2[0] == best[0][0] and k2[1] >= best[0][1] - 0.05
+                        and not lookalike(o2, o, self.cfg.lookalike_tolerance)):
                     return False
-            # a placed look-alike right here is more likely the one that moved a little
-            c = pts.mean(axis=0)
-            if np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > 1.0:
-                for u in self.object_map.placed():
-                    if (not u.structure and u is not o
-                            and np.hypot(*(u.pose_xytheta[:2] - c)) < 1.0 + u.extent_m() / 2
-                            and lookalike(u, o, self.cfg.lookalike_tolerance)):
-                        return False
-        self._relocate(o, mt, stamp_s, events)
+        self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)
         m.matched_object = o.id
         return True
+
+    def _part_of_larger(self, o: MapObject, mt) -> bool:
+        """Beyond the paper: unexplained returns this run just outside the object placed at the
+        match (a ring 0.1-0.4 m beyond its outline) mean what was seen is a part of something
+        larger; a footstool fits any corner of a desk."""
+        g = self._grid
+        cells = g.world_to_cell(o.cells_world(mt.pose_xytheta, dense=True))
+        ok = g.in_bounds(cells)
+        if not ok.any():
+            return True
+        cells = np.unique(cells[ok], axis=0)
+        lo = cells.min(axis=0) - 10
+        hi = cells.max(axis=0) + 11
+        lo = np.maximum(lo, 0)
+        hi = np.minimum(hi, [g.width, g.height])
+        mask = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
+        mask[cells[:, 1] - lo[1], cells[:, 0] - lo[0]] = True
+        d = ndimage.distance_transform_edt(~mask) * g.resolution_m
+        ring = (d > 0.1) & (d <= 0.4)
+        sub = self._unexplained[lo[1]:hi[1], lo[0]:hi[0]]
+        inside = (sub[mask] >= 2).sum()
+        outside = (sub[ring] >= 2).sum()
+        return bool(outside > max(3, 0.25 * inside))
 
     def _try_match_gamma(self, g: MapObject, o: MapObject, stamp_s, events) -> None:
         pts = g.cells_world()
@@ -411,7 +559,8 @@ class GatmoMapper:
         free = self._free[c[ok, 1], c[ok, 0]] >= self.cfg.match_free_rays
         return bool(np.mean(free) <= self.cfg.match_max_free_fraction)
 
-    def _relocate(self, o: MapObject, mt, stamp_s, events) -> None:
+    def _relocate(self, o: MapObject, mt, stamp_s, events,
+                  support_scans: int | None = None) -> None:
         old = o.pose_xytheta.copy()
         o.pose_xytheta = mt.pose_xytheta.copy()
         moved = np.hypot(*(old[:2] - o.pose_xytheta[:2])) > 0.1 or \
@@ -420,8 +569,10 @@ class GatmoMapper:
         kind = "relocated" if moved else "restored"
         o.moved_count += int(moved)
         o.record(self.run, stamp_s)
+        self._clear_evidence(o.id)
+        self._hits[o.id] = self.cfg.confirm_min_beams  # just seen where it stands
         events.append(Event(float(stamp_s), self.run, kind, o.id, o.label, old.tolist(),
-                            o.pose_xytheta.tolist(), float(mt.score)))
+                            o.pose_xytheta.tolist(), float(mt.score), support_scans))
         self.counts[kind] += 1
         if moved:  # objects that look alike become movable too (paper, Fig. 1)
             for u in self.object_map.U:
@@ -450,6 +601,11 @@ class GatmoMapper:
     def _to_gamma(self, m: Metaobject, stamp_s, events) -> None:
         pts = m.chair_points()
         if len(pts) < self.cfg.chair_min_cells:
+            return
+        # a part of an object the map already has where it stands (seen before it was placed
+        # there) is no new object
+        near, _ = self._explained(pts)
+        if near.mean() > 0.5:
             return
         shape, edge, pose = shape_from_points(pts, self._grid.resolution_m)
         o = MapObject(self.object_map.next_id, None, "Gamma", pose, shape, edge,

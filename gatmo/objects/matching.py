@@ -21,7 +21,10 @@ class Match:
 
 
 class EdgeField:
-    """exp(-d^2 / 2 sigma^2) of the distance to the object's edge points, in its own frame."""
+    """exp(-d^2 / 2 sigma^2) of the distance d to the object's edge points, in its own frame
+    (the paper's "grids formed by adding a Gaussian distribution around each edge point"), at
+    two widths: ``sigma_m`` for scoring and 2.5 sigma for the coarse search. Also keeps the
+    object's dominant edge directions (:func:`line_directions`)."""
 
     def __init__(self, obj: MapObject, sigma_m: float, pad_m: float = 1.0):
         res = obj.resolution_m / 2.0
@@ -34,7 +37,11 @@ class EdgeField:
         mask[idx[:, 1], idx[:, 0]] = False
         d = ndimage.distance_transform_edt(mask) * res
         self.val = np.exp(-(d**2) / (2 * sigma_m**2))
+        self.coarse = np.exp(-(d**2) / (2 * (2.5 * sigma_m) ** 2))
         self.lo, self.res = lo, res
+        self.extent_m = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+        self.lines = line_directions(pts)
+        self.principal = principal_angle(pts)
 
     def score(self, q_xy: np.ndarray) -> np.ndarray:
         """Mean field value of point sets q (..., P, 2) in the object frame -> (...)."""
@@ -45,6 +52,18 @@ class EdgeField:
                      0.0)
         return v.mean(axis=-1)
 
+    def score_poses(self, pts_centred: np.ndarray, thetas: np.ndarray, offs: np.ndarray,
+                    coarse: bool = False) -> np.ndarray:
+        """Scores (R, T, T) of centred points for rotations (R,) and translations offs x offs."""
+        from gatmo.objects._kernels import score_poses_kernel
+
+        val = self.coarse if coarse else self.val
+        return score_poses_kernel(val, float(self.lo[0]), float(self.lo[1]), float(self.res),
+                                  np.ascontiguousarray(pts_centred, dtype=np.float64),
+                                  np.ascontiguousarray(thetas, dtype=np.float64),
+                                  np.ascontiguousarray(offs, dtype=np.float64),
+                                  np.ascontiguousarray(offs, dtype=np.float64))
+
 
 def principal_angle(points_xy: np.ndarray) -> float:
     d = points_xy - points_xy.mean(axis=0)
@@ -54,48 +73,115 @@ def principal_angle(points_xy: np.ndarray) -> float:
     return float(np.arctan2(vt[0, 1], vt[0, 0]))
 
 
+def line_directions(points_xy: np.ndarray, radius_m: float = 0.12, max_lines: int = 3,
+                    min_support: int = 4) -> list[float]:
+    """Directions [rad, in [0, pi)] of the dominant straight edges of a point set (paper, Sec. V:
+    "lines are fit to the sets of edge points"): every point's local direction by SVD of its
+    neighbours within ``radius_m``, weighted by how line-like that neighbourhood is, voted into
+    5-degree bins; peaks at least 20 degrees apart with ``min_support`` points, strongest first.
+    """
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points_xy, dtype=float)
+    if len(pts) < 3:
+        return []
+    tree = cKDTree(pts)
+    angles, weights = [], []
+    for nb in tree.query_ball_point(pts, radius_m):
+        if len(nb) < 3:
+            continue
+        q = pts[nb] - pts[nb].mean(axis=0)
+        _, sv, vt = np.linalg.svd(q, full_matrices=False)
+        lin = 1.0 - sv[1] / max(sv[0], 1e-12)
+        if lin < 0.5:
+            continue  # a corner or a blob: no direction
+        angles.append(np.arctan2(vt[0, 1], vt[0, 0]) % np.pi)
+        weights.append(lin)
+    if not angles:
+        return []
+    a = np.array(angles)
+    w = np.array(weights)
+    nb = 36
+    hist = np.bincount((a / np.pi * nb).astype(int) % nb, weights=w, minlength=nb)
+    count = np.bincount((a / np.pi * nb).astype(int) % nb, minlength=nb)
+    smooth = hist + 0.5 * (np.roll(hist, 1) + np.roll(hist, -1))
+    out: list[float] = []
+    for b in np.argsort(-smooth):
+        if len(out) >= max_lines or smooth[b] <= 0:
+            break
+        support = count[b] + count[(b - 1) % nb] + count[(b + 1) % nb]
+        if support < min_support:
+            continue
+        centre = (b + 0.5) * np.pi / nb
+        d = np.abs(((a - centre + np.pi / 2) % np.pi) - np.pi / 2)
+        m = d < np.radians(7.5)
+        # circular mean of the members (angles mod pi: double them)
+        ang = 0.5 * np.arctan2(np.sum(w[m] * np.sin(2 * a[m])), np.sum(w[m] * np.cos(2 * a[m])))
+        ang = ang % np.pi
+        if all(abs(((ang - o + np.pi / 2) % np.pi) - np.pi / 2) > np.radians(20) for o in out):
+            out.append(float(ang))
+    return out
+
+
+def candidate_rotations(points_xy: np.ndarray, field: EdgeField) -> np.ndarray:
+    """Rotations (object frame -> map) that align a line of the points with a line of the
+    object (two each: the line may face either way), plus the four principal-axis alignments;
+    "usually between two and five" per line pair in the paper."""
+    lines_p = line_directions(points_xy)
+    cands = []
+    for a_p in lines_p:
+        for a_o in field.lines:
+            cands += [a_p - a_o, a_p - a_o + np.pi]
+    a_p = principal_angle(points_xy)
+    cands += [a_p - field.principal + k * np.pi / 2 for k in range(4)]
+    out: list[float] = []
+    for th in cands:
+        th = float(wrap_angle(th))
+        if all(abs(wrap_angle(th - o)) > np.radians(2.5) for o in out):
+            out.append(th)
+    return np.array(out)
+
+
 def match_points(points_xy: np.ndarray, obj: MapObject, cfg, field: EdgeField | None = None,
                  prior_yaw: float | None = None) -> Match:
-    """Best pose of ``obj`` explaining world points (P, 2), with its score in [0, 1]."""
+    """Best pose of ``obj`` explaining world points (P, 2), with its score in [0, 1].
+
+    Candidate alignments from lines and principal axes (:func:`candidate_rotations`), each
+    searched coarsely (+-6 deg, translations of the object's centroid over its own size around
+    the points' centroid, on the wide field), the best few refined on the sharp field."""
     field = field or EdgeField(obj, cfg.match_edge_sigma_m)
-    c_p = points_xy.mean(axis=0)
-    a_p = principal_angle(points_xy)
-    a_o = principal_angle(obj.edge_xy if len(obj.edge_xy) > 2 else obj.shape_xy)
-    best = (-1.0, None)
-    step = max(obj.resolution_m, 0.025)
-    offs = np.arange(-cfg.match_search_m, cfg.match_search_m + 1e-9, step)
-    dth = np.radians(np.arange(-cfg.match_search_deg, cfg.match_search_deg + 1e-9, 3.0))
-    for k in range(4):
-        th0 = wrap_angle(a_p - a_o + k * np.pi / 2)
-        for th in th0 + dth:
-            # the object's centroid (0 in its frame) goes to the points' centroid + offset
-            R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
-            base = (points_xy - c_p) @ R  # = R^T (p - c_p)
-            ox, oy = np.meshgrid(offs, offs, indexing="ij")
-            t = np.stack([ox.ravel(), oy.ravel()], axis=1)  # translation in the map frame
-            tl = t @ R  # R^T t
-            q = base[None, :, :] - tl[:, None, :]
-            s = field.score(q)
-            i = int(np.argmax(s))
-            if s[i] > best[0] + 1e-9 or (
-                abs(s[i] - best[0]) <= 1e-9 and prior_yaw is not None and best[1] is not None
-                and abs(wrap_angle(th - prior_yaw)) < abs(wrap_angle(best[1][2] - prior_yaw))
-            ):
-                best = (float(s[i]), np.array([c_p[0] + t[i, 0], c_p[1] + t[i, 1], th]))
+    pts = np.asarray(points_xy, dtype=float)
+    c_p = pts.mean(axis=0)
+    P = pts - c_p
+    rots = candidate_rotations(pts, field)
+    dth = np.radians(np.arange(-6.0, 6.01, 3.0))
+    thetas = (rots[:, None] + dth[None, :]).ravel()
+    reach = cfg.match_search_m + field.extent_m / 2
+    step = 0.1
+    offs = np.arange(-reach, reach + 1e-9, step)
+    s = field.score_poses(P, thetas, offs, coarse=True)
+    flat = np.argsort(-s.ravel())
+    picks: list[tuple[float, float, float]] = []
+    for f in flat[:200]:
+        r, i, j = np.unravel_index(f, s.shape)
+        cand = (thetas[r], offs[i], offs[j])
+        if all(abs(wrap_angle(cand[0] - p[0])) > np.radians(4) or
+               np.hypot(cand[1] - p[1], cand[2] - p[2]) > 0.15 for p in picks):
+            picks.append(cand)
+        if len(picks) >= 6:
+            break
+    best = (-1.0, np.zeros(3))
+    fth = np.radians(np.arange(-3.0, 3.01, 1.0))
+    foff = np.arange(-0.1, 0.1 + 1e-9, 0.025)
+    for th0, tx, ty in picks:
+        sf = field.score_poses(P - np.array([tx, ty]), th0 + fth, foff)
+        r, i, j = np.unravel_index(int(np.argmax(sf)), sf.shape)
+        if sf[r, i, j] > best[0]:
+            best = (float(sf[r, i, j]),
+                    np.array([c_p[0] + tx + foff[i], c_p[1] + ty + foff[j], th0 + fth[r]]))
     score, pose = best
-    # refine: finer local search around the best
-    fine = np.arange(-step, step + 1e-9, step / 4)
-    for th in pose[2] + np.radians(np.arange(-3.0, 3.01, 0.5)):
-        R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
-        ox, oy = np.meshgrid(fine, fine, indexing="ij")
-        t = np.stack([ox.ravel(), oy.ravel()], axis=1) + pose[:2]
-        q = (points_xy[None, :, :] - t[:, None, :]) @ R
-        s = field.score(q)
-        i = int(np.argmax(s))
-        if s[i] > score:
-            score, pose = float(s[i]), np.array([t[i, 0], t[i, 1], th])
     if prior_yaw is not None:
-        pose[2] = _closest_symmetric_yaw(obj, field, points_xy, pose, prior_yaw, score)
+        pose[2] = _closest_symmetric_yaw(obj, field, pts, pose, prior_yaw, score)
     pose[2] = float(wrap_angle(pose[2]))
     return Match(obj.id, score, pose)
 

@@ -122,10 +122,53 @@ class Metaobject:
             return "chair"
         return "person"
 
-    def chair_points(self, min_fraction: float = 0.3) -> np.ndarray:
-        """World centres (K, 2) of evidence cells hit in at least ``min_fraction`` of scans."""
-        need = max(2, int(np.ceil(min_fraction * self.n_obs)))
+    def chair_points(self, min_count: int = 2, min_fraction: float = 0.05) -> np.ndarray:
+        """World centres (K, 2) of evidence cells hit in at least ``min_count`` scans and
+        ``min_fraction`` of this track's scans. The count is absolute, not a fraction of all
+        scans: a robot driving past sees each side of a still object for a part of the time."""
+        need = max(min_count, int(np.ceil(min_fraction * self.n_obs)))
         keys = [k for k, v in self.evidence.items() if v >= need]
         if not keys:
             return np.zeros((0, 2))
         return (np.array(keys, dtype=float) + 0.5) * self.res
+
+    def _cells(self) -> np.ndarray:
+        if not self.evidence:
+            return np.zeros((0, 2))
+        return (np.array(list(self.evidence), dtype=float) + 0.5) * self.res
+
+    def near(self, points: np.ndarray, dist_m: float) -> bool:
+        """Whether any of ``points`` (N, 2) lies within ``dist_m`` of this track's evidence."""
+        cells = self._cells()
+        if len(cells) == 0 or len(points) == 0:
+            return False
+        lo = points.min(axis=0) - dist_m
+        hi = points.max(axis=0) + dist_m
+        cells = cells[np.all((cells >= lo) & (cells <= hi), axis=1)]
+        if len(cells) == 0:
+            return False
+        d2 = ((points[:, None, :] - cells[None, :, :]) ** 2).sum(-1)
+        return bool(d2.min() <= dist_m**2)
+
+    def touches(self, other: Metaobject) -> bool:
+        """Evidence cells of the two tracks overlap or are adjacent (8-connectivity)."""
+        if len(self.evidence) > len(other.evidence):
+            self, other = other, self
+        for kx, ky in self.evidence:
+            for dx in (-1, 0, 1):
+                for dy in (-1, 0, 1):
+                    if (kx + dx, ky + dy) in other.evidence:
+                        return True
+        return False
+
+    def absorb(self, other: Metaobject) -> None:
+        """Merge ``other`` (a part of the same object tracked separately) into this track."""
+        for k, v in other.evidence.items():
+            self.evidence[k] = self.evidence.get(k, 0) + v
+        self.n_obs = max(self.n_obs, other.n_obs)
+        self.first_seen = min(self.first_seen, other.first_seen)
+        self.last_seen = max(self.last_seen, other.last_seen)
+        self.ll_chair = max(self.ll_chair, other.ll_chair)
+        self.ll_person = min(self.ll_person, other.ll_person)
+        if self.matched_object is None:
+            self.matched_object = other.matched_object
