@@ -43,6 +43,30 @@ def _png(grid, path: Path) -> None:
     plt.close(fig)
 
 
+def _vs_gmapping(t, poses, rel) -> dict | None:
+    """Ours and the gmapping-corrected Intel log on the relations the latter covers."""
+    from gatmo.datasets.metrics import relations_error
+    from gatmo.datasets.open import open_log
+    from gatmo.datasets.relations import Relations
+
+    path = DATA.parent / "radish-corrected" / "intel-corrected.log.gz"
+    if not path.exists():
+        return None
+    ref = [s for s in open_log(path, pose_is_reference=True, skip_bad=True)
+           if s.gt_pose_xytheta is not None]
+    rt = np.array([s.stamp_s for s in ref]) + 976052857.33753  # README of the data
+    rp = np.array([s.gt_pose_xytheta for s in ref])
+
+    def covered(q):
+        i = np.clip(np.searchsorted(rt, q), 1, len(rt) - 1)
+        return np.minimum(np.abs(rt[i - 1] - q), np.abs(rt[i] - q)) <= 0.002
+
+    m = covered(np.asarray(rel.t1_s)) & covered(np.asarray(rel.t2_s))
+    sub = Relations(np.asarray(rel.t1_s)[m], np.asarray(rel.t2_s)[m],
+                    np.asarray(rel.rel_xytheta)[m])
+    return {"gmapping": relations_error(rt, rp, sub), "ours": relations_error(t, poses, sub)}
+
+
 def main(argv=None) -> int:
     from gatmo.datasets.metrics import relations_error
     from gatmo.datasets.relations import read_relations
@@ -88,6 +112,12 @@ def main(argv=None) -> int:
             print(f"  {k:13s} {_fmt(r[k])}  (n={r[k]['n_used']})", flush=True)
         if name == "intel":
             _png(grid, OUT / "intel_map.png")
+            r["vs_gmapping"] = _vs_gmapping(t, opt, rel)
+            if r["vs_gmapping"]:
+                g = r["vs_gmapping"]
+                print(f"  on the {g['gmapping']['n_used']} relations the gmapping-corrected log "
+                      f"covers: gmapping {_fmt(g['gmapping'])}, ours {_fmt(g['ours'])}",
+                      flush=True)
     (OUT / "mapbuild.json").write_text(json.dumps(out, indent=1, default=float))
     return 0
 

@@ -44,6 +44,7 @@ class GraphConfig:
     closure_max_candidates: int = 2  # earlier visits tried per keyframe (nearest first)
     closure_skip_after_accept: int = 1  # keyframes to wait after a confirmed closure
     closure_max_dist_m: float = 4.0  # a match farther from the submap's centre is refused
+    track_span: int = 3  # closures this recent (keyframes) narrow the window near them
     group_size: int = 3  # a closure enters the graph once this many agree with each other
     group_span: int = 15  # ... found within this many keyframes
     group_xy_m: float = 0.3  # agreement: the loop through two closures and odometry closes
@@ -178,7 +179,14 @@ class PoseGraph:
 
     def _windows(self, a: int, b: int) -> tuple[float, float]:
         c = self.cfg
-        L = self.path_m[b] - self.path_m[a]
+        s = self.path_m
+        L = s[b] - s[a]
+        # tracking a region closed a moment ago: drift only since that closure
+        for ca, cb, _ in reversed(self.closures):
+            if b - cb > c.track_span:
+                break
+            if abs(a - ca) <= c.submap_half_width:
+                L = min(L, abs(s[b] - s[cb]) + abs(s[a] - s[ca]))
         wxy = min(c.window_base_m + c.window_per_m * L, c.window_max_m)
         wth = min(c.window_theta_base_rad + c.window_theta_per_m * L, c.window_theta_max_rad)
         return wxy, wth
