@@ -3,12 +3,16 @@
 Keyframes come from scan-matching odometry (between factors, noise growing with the step). Each
 new keyframe looks for loop closures against earlier parts of the trajectory: candidates are
 earlier keyframes whose current estimate lies within a search radius that grows with the path
-driven between the two (drift); the new keyframe's scan is matched to a submap (a few
-consecutive keyframes merged) by a correlative x-y-theta search on a likelihood field, refined
-by ICP and accepted only by a strict test (:mod:`gatmo.scanmatch.correlative`). Closures enter
-iSAM2 with a Cauchy-robust noise model as soon as they are found, so later searches start from
-corrected poses. A final batch Levenberg-Marquardt pass drops closures that still disagree with
-the graph (residual above a bound) and re-optimizes.
+driven between the two (drift), one per earlier visit, nearest first. The new keyframe's scan
+is matched to a submap (consecutive keyframes merged) by a branch-and-bound correlative x-y-theta
+search on a likelihood field, refined by ICP and accepted only by a strict test (score, no
+second peak, ICP fit, not degenerate; :mod:`gatmo.scanmatch.correlative`). A match enters the
+graph only once ``group_size`` matches found within ``group_span`` keyframes agree with each
+other (the loop through two closures and the odometry closes), so one look-alike place cannot
+bend the map. Confirmed closures go into iSAM2 at once (Gaussian noise: a robust kernel would
+ignore the metres-large first closure of a loop), so later searches start from corrected poses.
+A final batch Levenberg-Marquardt pass with Cauchy-robust closures drops closures that still
+disagree with the graph (residual above ``prune_xy_m`` / ``prune_theta_rad``) and re-optimizes.
 
 Frames: all poses (x [m], y [m], theta [rad]) are the base frame in the odometry/map frame whose
 origin is the first keyframe; keyframe points (N, 2) are in that keyframe's base frame.

@@ -142,3 +142,22 @@ def test_map_build_on_the_first_mit_csail_scans(tmp_path):
     grid = load_map(tmp_path / "m.yaml")
     assert summary.scans == 150 and grid.occupied.sum() > 500
     assert len((tmp_path / "p.tum").read_text().splitlines()) == 151
+
+
+def test_scans_with_too_few_points_fall_back_to_odometry_and_are_counted():
+    from gatmo.pipeline.mapping import build_trajectory
+
+    g = room_grid(11, 8, 0.05, boxes=BOXES)
+    truth = np.array([[2.0 + 0.1 * i, 4.0, 0.0] for i in range(40)])
+    scans = []
+    for i, p in enumerate(truth):
+        s = make_scan(g, p, n_beams=181, max_range_m=8.0, odom_pose_xytheta=p,
+                      stamp_s=0.1 * i)
+        if i % 5 == 3:  # blinded: every return beyond range, no valid point
+            s.ranges_m[:] = np.inf
+        scans.append(s)
+    icp, opt, res, stats = build_trajectory(scans)
+    assert stats["fallback_few_points"] == 8
+    assert len(opt) == 40 and np.isfinite(opt).all()
+    err = np.hypot(*(opt[:, :2] - (truth[:, :2] - truth[0, :2])).T)
+    assert err.max() < 0.05  # odometry (exact here) carried the blinded scans
