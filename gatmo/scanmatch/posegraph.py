@@ -55,10 +55,10 @@ class GraphConfig:
     group_theta_rad: float = float(np.radians(3.0))  # ... within these bounds
     window_base_m: float = 0.6  # search half-width at zero path length
     window_per_m: float = 0.05  # ... growing with the path driven between the two keyframes
-    window_max_m: float = 8.0
+    window_max_m: float = 12.0
     window_theta_base_rad: float = float(np.radians(6.0))
     window_theta_per_m: float = float(np.radians(0.5))
-    window_theta_max_rad: float = float(np.radians(35.0))
+    window_theta_max_rad: float = float(np.radians(57.0))
     match: MatchConfig = field(default_factory=MatchConfig)
     odom_sigma_xy_m: float = 0.02
     odom_sigma_xy_per_m: float = 0.05
