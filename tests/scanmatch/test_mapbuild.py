@@ -161,3 +161,29 @@ def test_scans_with_too_few_points_fall_back_to_odometry_and_are_counted():
     assert len(opt) == 40 and np.isfinite(opt).all()
     err = np.hypot(*(opt[:, :2] - (truth[:, :2] - truth[0, :2])).T)
     assert err.max() < 0.05  # odometry (exact here) carried the blinded scans
+
+
+def test_map_build_command_on_a_simulated_carmen_log(tmp_path):
+    from gatmo.cli import main
+    from gatmo.datasets.carmen import write_carmen
+    from gatmo.datasets.sim import SimConfig, make_world, simulate_run
+    from gatmo.datasets.tum import read_tum
+    from gatmo.maps.io import load_map
+
+    rng = np.random.default_rng(7)
+    cfg = SimConfig.for_preset("office")
+    cfg.robot.duration_s = 20
+    world, route = make_world("office", rng)
+    scans = simulate_run(world, route, cfg, rng)
+    log = write_carmen(tmp_path / "run.clf", scans)
+    rc = main(["map", "build", str(log), "--out", str(tmp_path / "m.yaml"), "--poses-out",
+               str(tmp_path / "p.tum"), "--resolution", "0.1"])
+    assert rc == 0
+    grid = load_map(tmp_path / "m.yaml")
+    assert grid.resolution_m == pytest.approx(0.1) and grid.occupied.sum() > 100
+    t, poses = read_tum(tmp_path / "p.tum")
+    gt = np.array([s.gt_pose_xytheta for s in scans])
+    assert len(poses) == len(scans)
+    # the trajectory (first scan's frame) matches the truth's shape
+    ref = np.array([relative(gt[0], q) for q in gt])
+    assert np.hypot(*(poses[:, :2] - ref[:, :2]).T).max() < 0.3
