@@ -135,7 +135,7 @@ def test_map_build_on_the_first_mit_csail_scans(tmp_path):
     e_opt = relations_error(t, opt, rel)
     assert e_opt["n_used"] > 200
     assert len(res.closures) > 0
-    assert e_opt["trans_mean_m"] <= e_icp["trans_mean_m"] + 0.005
+    assert e_opt["trans_mean_m"] < 0.75 * e_icp["trans_mean_m"]  # 0.037 vs 0.070 m measured
     assert e_opt["trans_mean_m"] < 0.1 and e_opt["rot_mean_deg"] < 1.5
     # the command's library call writes a loadable map and the trajectory
     summary = build_map(bag, tmp_path / "m.yaml", poses_out=tmp_path / "p.tum", max_scans=150)
