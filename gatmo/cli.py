@@ -400,8 +400,9 @@ def map_build(
     max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
     fmt: FormatOpt = None,
 ) -> None:
-    """Build a map from a raw log: scan-matching odometry, loop closures, a pose graph (gtsam),
-    then log-odds ray tracing at the optimized poses."""
+    """Build a map from a raw log (scan matching, loop closures, gtsam pose graph).
+
+    The occupancy grid is ray traced (log-odds) at the optimized poses; a map_server map."""
     from gatmo.pipeline.mapping import build_map
 
     bar, update = _progress("map build")
