@@ -440,9 +440,10 @@ class GatmoMapper:
             self._meta = [m for m in self._meta if m.id not in gone]
 
     def _candidates(self, pts: np.ndarray) -> list[tuple[int, MapObject]]:
-        """(tier, object) pairs a chair may be: absent ones (paper), placed ones near it that
-        are in doubt or not yet seen at their place this run (a shift), both tier 0; movable
-        ones elsewhere not seen at their place this run (paper: A and M), tier -1."""
+        """(tier, object) pairs a chair may be: absent ones (paper) and placed ones near it in
+        doubt, tier 0; placed ones near it not yet seen at their place this run, tier 1 (a
+        shift: only a match near their pose counts, then as tier 0); movable ones elsewhere
+        not seen at their place this run (paper: A and M), tier -1."""
         c = pts.mean(axis=0)
         out = []
         for o in self.object_map.objects:
@@ -457,7 +458,7 @@ class GatmoMapper:
                          and o.id not in self._doubt)
             near = np.hypot(*(o.pose_xytheta[:2] - c)) < self.cfg.doubt_search_m + o.extent_m()
             if near and not confirmed:
-                out.append((0, o))
+                out.append((0 if o.id in self._doubt else 1, o))
             elif o.status == "M" and not confirmed:
                 out.append((-1, o))
         return out
@@ -498,6 +499,10 @@ class GatmoMapper:
             if self._part_of_larger(o, mt):
                 continue
             dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
+            if tier == 1:  # placed, seen nowhere yet, not in doubt: only a shift nearby
+                if dist > self.cfg.doubt_search_m:
+                    continue
+                tier = 0
             # tier first; look-alikes: prefer the nearest one
             key = (tier, round(mt.score * 20) / 20, -dist)
             rivals.append((key, o, mt))

@@ -218,8 +218,11 @@ class LocalizationStack:
         events: list = []
         changed = False
         if self.mapper is not None:
+            # the filter updates only every update_min_d of travel; between its confident
+            # updates the matcher's pose stays precise for a while (confident_for_m), and the
+            # scan-to-map alignment below checks every such pose directly
             pose_ok = is_confident(est, self.fusion, strict=True) or (
-                confident and self._travel_since_reset_m <= self.fusion.confident_for_m)
+                self._travel_since_reset_m <= self.fusion.confident_for_m)
             map_pose = pose
             if pose_ok and self.fusion.align_to_map:
                 if self._aligner is None:
