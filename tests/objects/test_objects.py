@@ -195,3 +195,46 @@ def test_end_to_end_moved_box_is_relocated_with_its_id():
     assert np.mean(d) < 0.05
     assert np.hypot(*(box.pose_xytheta[:2] - true_new[:2])) < 0.15
     assert box.status == "M" and box.moved_count == 1 and box.history[-1]["status"] == "M"
+
+
+def test_partial_view_of_a_square_is_aligned_by_its_lines():
+    """Two sides of a square box seen from a corner: its principal axes say nothing (a square's
+    are arbitrary and the L's run diagonally); the fitted lines give the rotation
+    (paper, Sec. V)."""
+    from gatmo.objects.objectmap import MapObject
+
+    shape = _box(0.7, 0.7)
+    obj_shape, edge, pose0 = shape_from_points(shape, 0.05)
+    obj = MapObject(1, "box", "A", pose0, obj_shape, edge, resolution_m=0.05)
+    true = np.array([6.0, 4.0, 0.4])
+    lo = edge.min(axis=0)
+    two_sides = edge[(edge[:, 0] < lo[0] + 0.03) | (edge[:, 1] < lo[1] + 0.03)]
+    m = match_points(transform_points(true, two_sides), obj, CFG, prior_yaw=0.4)
+    assert m.score > 0.9
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(transform_points(true, obj_shape)).query(
+        transform_points(m.pose_xytheta, obj_shape))
+    assert np.mean(d) < 0.03
+
+
+def test_line_directions_of_a_rotated_rectangle():
+    from gatmo.objects.matching import line_directions
+
+    _, edge, _ = shape_from_points(_box(1.4, 0.7), 0.05)
+    got = sorted(line_directions(transform_points(np.array([0.0, 0.0, 0.3]), edge)))
+    assert len(got) == 2
+    assert abs(got[0] - 0.3) < np.radians(3) and abs(got[1] - (0.3 + np.pi / 2)) < np.radians(3)
+
+
+def test_pose_scoring_kernel_agrees_with_numpy_reference():
+    from gatmo.objects._kernels import score_poses_kernel, score_poses_reference
+
+    rng = np.random.default_rng(0)
+    val = rng.random((40, 50))
+    pts = rng.normal(0.0, 0.3, (25, 2))
+    th = np.array([-0.3, 0.0, 1.2])
+    offs = np.linspace(-0.4, 0.4, 7)
+    a = score_poses_kernel(val, -1.0, -0.8, 0.04, pts, th, offs, offs)
+    b = score_poses_reference(val, -1.0, -0.8, 0.04, pts, th, offs, offs)
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)

@@ -1,0 +1,135 @@
+"""GATMO alone, fed ground-truth poses (no localization error), on simulated halls: for every
+moved or shifted piece, whether the robot saw through its old place and saw it at its new place
+(from the simulator's truth), and what GATMO made of it. Separates GATMO's own accuracy from
+the localizer's.
+
+    python -m benchmarks.bench_gatmo_oracle [--seeds 5] [--first-seed 100]
+
+Outcomes: found (right object, true pose), wrong (relocated elsewhere), absent (noticed gone,
+not found), missed. Observability: both / old / new / none (>= 5 scans each).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+OUT = Path("bench-out")
+
+
+def observability(scans, piece_old: dict, piece_new: dict | None, res: float = 0.05):
+    """(scans with >= 5 rays through the old footprint, scans with >= 8 returns on the new)."""
+    from gatmo.geometry import compose, transform_points
+    from gatmo.pipeline.evaluate import _piece_points
+
+    told = cKDTree(transform_points(np.array(piece_old["pose"]), _piece_points(piece_old, res)))
+    tnew = None
+    if piece_new is not None:
+        tnew = cKDTree(transform_points(np.array(piece_new["pose"]),
+                                        _piece_points(piece_new, res)))
+    n_old = n_new = 0
+    for s in scans:
+        lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
+        r = s.ranges_m
+        a = lp[2] + s.angles_rad
+        u = np.stack([np.cos(a), np.sin(a)], 1)
+        valid = r < s.range_max_m
+        if tnew is not None:
+            d, _ = tnew.query(lp[:2] + r[valid, None] * u[valid], distance_upper_bound=0.06)
+            n_new += int(np.isfinite(d).sum() >= 8)
+        rr = np.where(valid, r, s.range_max_m) - 0.1
+        ts = np.arange(0.05, s.range_max_m, 0.05)
+        pts = lp[:2][None, None] + ts[None, :, None] * u[:, None, :]
+        m = ts[None, :] < rr[:, None]
+        d, _ = told.query(pts[m], distance_upper_bound=0.03)
+        inside = np.zeros(m.shape, bool)
+        inside[m] = np.isfinite(d)
+        n_old += int(inside.any(axis=1).sum() >= 5)
+    return n_old, n_new
+
+
+def one_seed(seed: int, runs: int, tmp: Path) -> list[dict]:
+    from gatmo.datasets.sim import simulate_scenario
+    from gatmo.maps.io import load_map
+    from gatmo.objects.mapper import GatmoMapper
+    from gatmo.pipeline.config import sim_stack_config
+    from gatmo.pipeline.evaluate import expected_pose, placement_error, tie_objects
+    from gatmo.pipeline.runs import load_scans
+
+    scen = simulate_scenario(tmp / f"s{seed}", preset="hall", runs=runs, seed=seed)
+    doc = json.loads(Path(scen.scenario_json).read_text())
+    mapper = GatmoMapper.from_config(sim_stack_config().gatmo, load_map(scen.map_yaml))
+    p2o = {v: k for k, v in tie_objects(mapper.object_map, doc).items()}
+    prev = {p["id"]: p for p in doc["map_objects"]}
+    rows = []
+    for k, log in enumerate(scen.logs):
+        scans = load_scans(log)
+        mapper.begin_run(k + 1)
+        events = []
+        for i, s in enumerate(scans):
+            for e in mapper.update(s.gt_pose_xytheta, s, pose_confident=True,
+                                   stamp_s=s.stamp_s):
+                events.append(dict(e.as_dict(), scan=i))
+        events += [dict(e.as_dict(), scan=len(scans)) for e in mapper.end_run()]
+        run = doc["runs"][k]
+        cur = {p["id"]: p for p in run["objects"]}
+        for c in run["changes"]:
+            pid = c["id"]
+            if c["kind"] not in ("moved", "shifted") or pid not in p2o:
+                continue
+            o = mapper.object_map.by_id[p2o[pid]]
+            n_old, n_new = observability(scans, prev[pid], cur.get(pid))
+            exp = expected_pose(o, pid, doc["map_objects"], run["objects"])
+            md, cd = placement_error(o, exp)
+            kinds = [e["kind"] for e in events if e["object_id"] == o.id]
+            rel = [e for e in events if e["object_id"] == o.id and e["kind"] == "relocated"]
+            ok = o.status in ("U", "M") and md < 0.1 and cd < 0.15
+            out = ("found" if ok else "wrong" if rel else "absent" if "absent" in kinds
+                   else "missed")
+            obs = ("both" if n_old >= 5 and n_new >= 5 else "new" if n_new >= 5
+                   else "old" if n_old >= 5 else "none")
+            rows.append({"seed": seed, "run": k + 1, "label": c["label"], "kind": c["kind"],
+                         "observed": obs, "outcome": out,
+                         "scans_to_match": rel[-1]["support_scans"] if rel else None})
+        prev = cur
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--first-seed", type=int, default=100)
+    ap.add_argument("--runs", type=int, default=4)
+    args = ap.parse_args(argv or [])
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            r = one_seed(seed, args.runs, Path(tmp))
+            rows += r
+            print(seed, json.dumps([(x["label"], x["observed"], x["outcome"]) for x in r]),
+                  flush=True)
+    table: dict = {}
+    for r in rows:
+        d = table.setdefault(r["observed"], {"found": 0, "wrong": 0, "absent": 0, "missed": 0})
+        d[r["outcome"]] += 1
+    both = table.get("both", {})
+    n_both = max(sum(both.values()), 1)
+    scans = [r["scans_to_match"] for r in rows if r["outcome"] == "found"
+             and r["scans_to_match"] is not None]
+    total = {"seeds": args.seeds, "by_observability": table,
+             "found_of_seen_both": both.get("found", 0) / n_both,
+             "wrong_per_run": sum(d["wrong"] for d in table.values()) / (args.seeds * args.runs),
+             "median_scans_to_match": float(np.median(scans)) if scans else None}
+    print(json.dumps(total, indent=1))
+    OUT.mkdir(exist_ok=True)
+    (OUT / "gatmo_oracle.json").write_text(json.dumps({"rows": rows, "total": total}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(__import__("sys").argv[1:]))
