@@ -37,7 +37,10 @@ class FusionConfig(GatmoModel):
     has position standard deviations below ``reset_max_std_xy_m`` and heading standard deviation
     below ``reset_max_std_theta_deg``: the matcher's offset is then reset. GATMO lays scans onto
     the object map only under the stricter ``absence_max_std_*`` (or within ``confident_for_m``
-    of travel after a reset): a wrong pose sees through everything.
+    of travel after a reset): a wrong pose sees through everything. When the localizer's pose
+    jumps against odometry by more than ``max_offset_jump_m`` (recovery injected particles, a
+    kidnapping), GATMO waits ``settle_after_jump_m`` of travel: a filter that has just locked
+    onto a look-alike place is as confident as one that is right.
     """
 
     use_scan_matcher: bool = True
@@ -49,6 +52,7 @@ class FusionConfig(GatmoModel):
     max_offset_jump_m: float = 0.5
     offset_gain: float = 1.0
     max_travel_without_reset_m: float = 1.0
+    settle_after_jump_m: float = 3.0
     align_to_map: bool = True
     align_min_fitness: float = 0.6
     align_max_correction_m: float = 0.15
@@ -160,12 +164,17 @@ class LocalizationStack:
         self.n_scans = 0
         self.n_map_updates = 0
         self._aligner: MapAligner | None = None
+        self._last_loc: np.ndarray | None = None
+        self._last_odom: np.ndarray | None = None
+        self._settle_left_m = 0.0
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
         self.T_map_match = None
         self._travel_since_reset_m = np.inf
         self._last_pose = None
+        self._last_loc = self._last_odom = None
+        self._settle_left_m = 0.0
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
@@ -175,6 +184,15 @@ class LocalizationStack:
         est = self.localizer.update(scan.odom_pose_xytheta, scan)
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)
         confident = is_confident(est, self.fusion)
+        odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
+        if self._last_loc is not None:
+            d_odom = relative(self._last_odom, odom)
+            # the wait counts the wheels' travel: the jump itself is no travel
+            self._settle_left_m = max(0.0, self._settle_left_m - float(np.hypot(*d_odom[:2])))
+            jump = relative(compose(self._last_loc, d_odom), loc_pose)
+            if np.hypot(jump[0], jump[1]) > self.fusion.max_offset_jump_m:
+                self._settle_left_m = self.fusion.settle_after_jump_m
+        self._last_loc, self._last_odom = loc_pose, odom
         reset = False
         pose = loc_pose
         if self.matcher is not None:
@@ -223,6 +241,7 @@ class LocalizationStack:
             # scan-to-map alignment below checks every such pose directly
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
+            pose_ok = pose_ok and self._settle_left_m <= 0.0
             map_pose = pose
             if pose_ok and self.fusion.align_to_map:
                 if self._aligner is None:

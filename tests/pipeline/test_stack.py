@@ -135,3 +135,46 @@ def test_offset_not_confirmed_for_a_while_falls_back_to_the_localizer():
     late = np.nonzero(travel > 1.2)[0]
     for i in late:  # beyond 1 m without a confident update: the localizer's own pose
         np.testing.assert_allclose(out[i].pose_xytheta, truth[i] + [0.2, 0, 0], atol=1e-9)
+
+
+class RecordingMapper:
+    """Records whether the stack trusted each pose enough for GATMO."""
+
+    def __init__(self):
+        self.trusted = []
+
+    def begin_run(self, run_id):
+        pass
+
+    def update(self, pose, scan, *, pose_confident, stamp_s):
+        self.trusted.append(pose_confident)
+        return []
+
+    def pop_map_changes(self):
+        return []
+
+    def grid(self):
+        return room_grid(12, 6, 0.05)
+
+
+def test_gatmo_waits_after_the_localizer_jumps():
+    """A confident filter that has just jumped (recovery, kidnapping) may sit on a look-alike
+    place: GATMO gets no trusted pose for settle_after_jump_m of travel."""
+    grid = room_grid(12, 6, 0.05)
+    truth = np.array([[1.0 + 0.1 * i, 3.0, 0.0] for i in range(80)])
+    scans = [make_scan(grid, p, odom_pose_xytheta=p, stamp_s=0.1 * i)
+             for i, p in enumerate(truth)]
+    loc = ScriptedLocalizer(truth, confident_at=range(80))
+    jumped = truth.copy()
+    jumped[20:, 1] += 2.0  # the estimate jumps 2 m sideways at scan 20, odometry does not
+    loc.truth = jumped
+    fusion = FusionConfig(align_to_map=False, settle_after_jump_m=3.0)
+    mapper = RecordingMapper()
+    stack = LocalizationStack(loc, None, mapper, fusion)
+    stack.begin_run(1)
+    for s in scans:
+        stack.step(s)
+    t = np.array(mapper.trusted)
+    assert t[:20].all()
+    assert not t[20:50].any()  # 3 m at 0.1 m per scan
+    assert t[52:].all()
