@@ -153,6 +153,15 @@ def beam_kernel(particles, laser_pose, ranges, angles, cells, res, ox, oy, z_hit
 
 
 @njit(cache=True, inline="always")
+def _pz_cubed(z, z_hit, inv_denom, const_j, short_j):
+    """AMCL's beam term pz^3 for a range error z = observed - expected [m]."""
+    pz = z_hit * np.exp(-(z * z) * inv_denom) + const_j
+    if z < 0:
+        pz += short_j
+    return pz * pz * pz
+
+
+@njit(cache=True, inline="always")
 def _beam_march_particle(particles, i, laser_pose, ranges, ca, sa, short, const, sd, inv_res, ox,
                          oy, z_hit, inv_denom, max_t, res, jump_min):
     """The beam model's p = 1 + sum_k pz_k^3 for particle i, ranges by :func:`_march_one`."""
@@ -166,11 +175,7 @@ def _beam_march_particle(particles, i, laser_pose, ranges, ca, sa, short, const,
         t = _march_one(sd, gx, gy, lc * ca[j] - ls * sa[j], ls * ca[j] + lc * sa[j], max_t,
                        jump_min)
         mr = t * res if t < max_t else max_t * res
-        z = ranges[j] - mr
-        pz = z_hit * np.exp(-(z * z) * inv_denom) + const[j]
-        if z < 0:
-            pz += short[j]
-        p += pz * pz * pz
+        p += _pz_cubed(ranges[j] - mr, z_hit, inv_denom, const[j], short[j])
     return p
 
 
@@ -224,11 +229,7 @@ def _beam_lut_particle(particles, i, laser_pose, ranges, ca, sa, short, const, i
         t = _lut_one(index, table, scale_cells, gx, gy, u0 + beam_bins[j],
                      lc * ca[j] - ls * sa[j], ls * ca[j] + lc * sa[j], max_t)
         mr = t * res if t < max_t else max_t * res
-        z = ranges[j] - mr
-        pz = z_hit * np.exp(-(z * z) * inv_denom) + const[j]
-        if z < 0:
-            pz += short[j]
-        p += pz * pz * pz
+        p += _pz_cubed(ranges[j] - mr, z_hit, inv_denom, const[j], short[j])
     return p
 
 
