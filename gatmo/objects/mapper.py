@@ -491,14 +491,14 @@ class GatmoMapper:
             f = self._fields[o.id] = EdgeField(o, self.cfg.match_edge_sigma_m)
         return f
 
-    def _try_match(self, m: Metaobject, stamp_s, events, only=None) -> bool:
+    def _try_match(self, m: Metaobject, stamp_s, events) -> bool:
         pts = m.chair_points()
         if len(pts) < self.cfg.chair_min_cells:
             return False
         best = None
         rivals: list = []
         diam_p = _diameter(pts)
-        cands = [(0, o) for o in only] if only is not None else self._candidates(pts)
+        cands = self._candidates(pts)
         everything = m.chair_points(min_count=1, min_fraction=0.0)
         for tier, o in cands:
             if tier < 0 and m.n_obs < self.cfg.match_patience_scans:
@@ -534,7 +534,7 @@ class GatmoMapper:
             return False
         _, o, mt = best
         patient = m.n_obs < self.cfg.match_patience_scans
-        if patient and only is None:
+        if patient:
             # a different-looking candidate nearly as good: wait for more of the object
             for k2, o2, _ in rivals:
                 if (o2 is not o and k2[0] == best[0][0] and k2[1] >= best[0][1] - 0.05

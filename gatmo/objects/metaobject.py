@@ -152,14 +152,9 @@ class Metaobject:
 
     def touches(self, other: Metaobject) -> bool:
         """Evidence cells of the two tracks overlap or are adjacent (8-connectivity)."""
-        if len(self.evidence) > len(other.evidence):
-            self, other = other, self
-        for kx, ky in self.evidence:
-            for dx in (-1, 0, 1):
-                for dy in (-1, 0, 1):
-                    if (kx + dx, ky + dy) in other.evidence:
-                        return True
-        return False
+        small, large = sorted((self.evidence, other.evidence), key=len)
+        return any((kx + dx, ky + dy) in large for kx, ky in small
+                   for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 
     def absorb(self, other: Metaobject) -> None:
         """Merge ``other`` (a part of the same object tracked separately) into this track."""
