@@ -45,10 +45,11 @@ def _scenario(tmp: Path):
     return load_map(scen.map_yaml), list(CarmenLog(scen.logs[0]))
 
 
-def _config(n, beams, model):
+def _config(n, beams, model, ray_caster="march"):
     from gatmo.localization import AmclConfig
 
     return AmclConfig(min_particles=n, max_particles=n, max_beams=beams, laser_model=model,
+                      beam_ray_caster=ray_caster,
                       z_hit=0.95, z_rand=0.05, z_short=0.05, z_max=0.05, sigma_hit_m=0.2,
                       lambda_short=0.1, alpha1=0.05, alpha2=0.05, alpha3=0.05, alpha4=0.05,
                       update_min_d_m=0.0, update_min_a_rad=0.0)
@@ -59,9 +60,8 @@ def run_ours(grid, scans, n, beams, model, max_updates, ray_caster="march"):
     used per update, set-up s) of our localizer."""
     from gatmo.localization import MonteCarloLocalizer
 
-    cfg = _config(n, beams, model)
+    cfg = _config(n, beams, model, ray_caster)
     loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(0))
-    loc.sensor.ray_caster = ray_caster
     sensor_ms = []
     weigh = loc.sensor.weigh
 

@@ -1,6 +1,8 @@
-"""numba kernels of the sensor models, parallel over particles (``*_serial``: the same on the
-calling thread). Plain-numpy references are in :mod:`gatmo.localization.sensor`; tests check both
-agree.
+"""numba kernels of the localizer: the sensor models, parallel over particles (``*_serial``: the
+same on the calling thread), and the particle-set steps (motion sampling, KLD resampling, the
+cluster estimate, the converged check) on the calling thread. Plain-numpy references are in
+:mod:`gatmo.localization.sensor`, :mod:`~gatmo.localization.motion` and
+:mod:`~gatmo.localization.particles`; tests check both agree.
 
 The ray casters are inlined from :mod:`gatmo.maps._kernels`; numba's on-disk cache only notices
 changes to *this* file, so after editing the casters there, delete this module's cache files
@@ -265,3 +267,275 @@ def beam_lut_kernel_serial(particles, laser_pose, ranges, beam_bins, ca, sa, sho
                                     index, table, scale_cells, inv_res, ox, oy, z_hit, inv_denom,
                                     max_t, res, beam_bins)
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Particle-set kernels: motion sampling, KLD resampling, cluster estimate, converged check.
+# They run on the calling thread (a few microseconds of work per thousand particles: waking a
+# second thread costs more). Random numbers come in pre-drawn; the numpy references
+# (:mod:`gatmo.localization.motion`, :mod:`gatmo.localization.particles`) take the same draws.
+
+
+@njit(cache=True, inline="always")
+def _wrap(a):
+    """:func:`gatmo.geometry.wrap_angle` of a scalar, bit for bit: (a + pi) % 2 pi - pi, the
+    modulo skipped when a + pi is already in [0, 2 pi) (where it returns its argument)."""
+    b = a + np.pi
+    if b >= 0.0 and b < 2.0 * np.pi:
+        return b - np.pi
+    return b % (2.0 * np.pi) - np.pi
+
+
+@njit(cache=True)
+def motion_diff_kernel(particles, rot1, trans, rot2, s1, st, s2, normals):
+    """Differential-drive odometry model: particles (N, 3) moved by (rot1, trans, rot2) with
+    standard deviations (s1, st, s2) times the standard normals ``normals`` (3, N)."""
+    n = particles.shape[0]
+    out = np.empty((n, 3))
+    for i in range(n):
+        th = particles[i, 2]
+        r1 = _wrap(rot1 - normals[0, i] * s1)
+        t = trans - normals[1, i] * st
+        r2 = _wrap(rot2 - normals[2, i] * s2)
+        out[i, 0] = particles[i, 0] + t * np.cos(th + r1)
+        out[i, 1] = particles[i, 1] + t * np.sin(th + r1)
+        out[i, 2] = _wrap(th + r1 + r2)
+    return out
+
+
+@njit(cache=True)
+def motion_omni_kernel(particles, bearing0, trans, dth, st, sr, ss, normals):
+    """Omnidirectional odometry model: translation ``trans`` along ``bearing0`` (relative to
+    the particle's heading), rotation ``dth``, noise (st, sr, ss) times ``normals`` (3, N)."""
+    n = particles.shape[0]
+    out = np.empty((n, 3))
+    for i in range(n):
+        th = particles[i, 2]
+        b = bearing0 + th
+        cb = np.cos(b)
+        sb = np.sin(b)
+        t = trans + normals[0, i] * st
+        r = dth + normals[1, i] * sr
+        s = normals[2, i] * ss
+        out[i, 0] = particles[i, 0] + (t * cb + s * sb)
+        out[i, 1] = particles[i, 1] + (t * sb - s * cb)
+        out[i, 2] = _wrap(th + r)
+    return out
+
+
+_KEY_OFF = 1 << 27  # bin keys within +-2^27 bins (+-67,000 km at 0.5 m) pack exactly
+
+
+@njit(cache=True, inline="always")
+def _bin_key(particles, i, bin_xy, bin_th):
+    """AMCL's histogram bin of particle i packed into one int64 (28 + 28 + 6 bits)."""
+    kx = np.int64(np.floor(particles[i, 0] / bin_xy)) + _KEY_OFF
+    ky = np.int64(np.floor(particles[i, 1] / bin_xy)) + _KEY_OFF
+    kt = np.int64(np.floor(_wrap(particles[i, 2]) / bin_th)) + 32
+    kx = min(max(kx, 0), (1 << 28) - 1)
+    ky = min(max(ky, 0), (1 << 28) - 1)
+    kt = min(max(kt, 0), 63)
+    return (kx << 34) | (ky << 6) | kt
+
+
+@njit(cache=True, inline="always")
+def _kld_limit(k, err, z, min_n, max_n):
+    """Fox 2003's bound for k occupied bins (as :func:`gatmo.localization.particles.kld_limit`,
+    with x^3 as x * x * x, the same in the numpy reference)."""
+    if k <= 1:
+        return max_n
+    b = 2.0 / (9.0 * (k - 1))
+    x = 1.0 - b + np.sqrt(b) * z
+    lim = np.ceil((k - 1) / (2.0 * err) * (x * x * x))
+    return int(min(max(lim, min_n), max_n))
+
+
+@njit(cache=True)
+def kld_resample_kernel(particles, weights, u0, u_perm, err, z, min_n, max_n, bin_xy, bin_th):
+    """AMCL's KLD resampling (N, 3) -> (n, 3).
+
+    ``max_n`` candidates by systematic resampling (offset ``u0`` in [0, 1)), taken in the order
+    of a Fisher-Yates shuffle driven by ``u_perm`` (max_n,) uniforms in [0, 1) (position i is
+    swapped with i + floor(u_perm[i] (max_n - i))); the set is the shortest prefix whose size
+    reaches the KLD limit of the number of histogram bins it occupies (``max_n`` if none)."""
+    m = weights.shape[0]
+    c = np.empty(m)
+    acc = 0.0
+    for i in range(m):
+        acc += weights[i]
+        c[i] = acc
+    last = c[m - 1]
+    for i in range(m):
+        c[i] /= last
+    idx = np.empty(max_n, dtype=np.int64)
+    j = 0
+    for k in range(max_n):
+        u = (u0 + k) / max_n
+        while j < m and c[j] <= u:  # searchsorted(c, u, side="right")
+            j += 1
+        idx[k] = min(j, m - 1)
+    size = 1
+    while size < 2 * max_n:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, -1, dtype=np.int64)
+    bins = 0
+    n = max_n
+    limit = max_n
+    for i in range(max_n):
+        s = i + min(np.int64(u_perm[i] * (max_n - i)), max_n - i - 1)
+        t = idx[i]
+        idx[i] = idx[s]
+        idx[s] = t
+        key = _bin_key(particles, idx[i], bin_xy, bin_th)
+        h = ((key * 0x2545F4914F6CDD1D) >> 20) & mask
+        while table[h] != -1 and table[h] != key:
+            h = (h + 1) & mask
+        if table[h] == -1:
+            table[h] = key
+            bins += 1
+            limit = _kld_limit(bins, err, z, min_n, max_n)
+        if i + 1 >= limit:
+            n = i + 1
+            break
+    out = np.empty((n, 3))
+    for i in range(n):
+        out[i, 0] = particles[idx[i], 0]
+        out[i, 1] = particles[idx[i], 1]
+        out[i, 2] = particles[idx[i], 2]
+    return out
+
+
+@njit(cache=True, inline="always")
+def _find(parent, a):
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@njit(cache=True)
+def cluster_labels_kernel(particles, bin_xy, bin_th, n_th, max_cells):
+    """Cluster label per particle (N,) int64: connected occupied histogram bins (26-neighbours),
+    labels numbered from 1 in raster order (x, y, heading bin) of each cluster's first bin, as
+    ``scipy.ndimage.label``; clusters touching across -pi/pi at the same (x, y) are joined under
+    the smaller label. All 0 (one cluster) when the bins' bounding box exceeds ``max_cells``."""
+    n = particles.shape[0]
+    kx = np.empty(n, dtype=np.int64)
+    ky = np.empty(n, dtype=np.int64)
+    kt = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        kx[i] = np.int64(np.floor(particles[i, 0] / bin_xy))
+        ky[i] = np.int64(np.floor(particles[i, 1] / bin_xy))
+        kt[i] = np.int64(np.floor(_wrap(particles[i, 2]) / bin_th))
+    x0, y0, t0 = kx.min(), ky.min(), kt.min()
+    sx = kx.max() - x0 + 1
+    sy = ky.max() - y0 + 1
+    st = kt.max() - t0 + 1
+    labels = np.zeros(n, dtype=np.int64)
+    if float(sx) * float(sy) * float(st) > max_cells:
+        return labels
+    lab = np.zeros((sx, sy, st), dtype=np.int32)
+    for i in range(n):
+        lab[kx[i] - x0, ky[i] - y0, kt[i] - t0] = -1
+    stack = np.empty((n, 3), dtype=np.int64)
+    nl = 0
+    for a in range(sx):
+        for b in range(sy):
+            for c in range(st):
+                if lab[a, b, c] != -1:
+                    continue
+                nl += 1
+                lab[a, b, c] = np.int32(nl)
+                stack[0, 0], stack[0, 1], stack[0, 2] = a, b, c
+                top = 1
+                while top > 0:
+                    top -= 1
+                    p, q, r = stack[top, 0], stack[top, 1], stack[top, 2]
+                    for dp in range(max(p - 1, 0), min(p + 2, sx)):
+                        for dq in range(max(q - 1, 0), min(q + 2, sy)):
+                            for dr in range(max(r - 1, 0), min(r + 2, st)):
+                                if lab[dp, dq, dr] == -1:
+                                    lab[dp, dq, dr] = np.int32(nl)
+                                    stack[top, 0], stack[top, 1], stack[top, 2] = dp, dq, dr
+                                    top += 1
+    parent = np.arange(nl + 1)
+    if st >= n_th:
+        for a in range(sx):
+            for b in range(sy):
+                la, lb = np.int64(lab[a, b, 0]), np.int64(lab[a, b, st - 1])
+                if la > 0 and lb > 0:
+                    ra, rb = _find(parent, la), _find(parent, lb)
+                    if ra < rb:
+                        parent[rb] = ra
+                    elif rb < ra:
+                        parent[ra] = rb
+    for i in range(n):
+        labels[i] = _find(parent, np.int64(lab[kx[i] - x0, ky[i] - y0, kt[i] - t0]))
+    return labels
+
+
+@njit(cache=True)
+def cluster_stats_kernel(particles, weights, labels):
+    """Weighted mean (3,) and covariance (3, 3) of the heaviest cluster (the smallest label of
+    the largest weight sum, sums accumulated in particle order); heading by circular mean, its
+    variance -2 log R. Uniform weights within the cluster when its weight sum is not > 0."""
+    n = particles.shape[0]
+    sums = np.zeros(labels.max() + 1)
+    counts = np.zeros(labels.max() + 1, dtype=np.int64)
+    for i in range(n):
+        sums[labels[i]] += weights[i]
+        counts[labels[i]] += 1
+    best = labels[0]
+    for k in range(sums.shape[0]):
+        if counts[k] > 0 and (sums[k] > sums[best] or (sums[k] == sums[best] and k < best)):
+            best = k
+    ws = 0.0
+    cnt = 0
+    for i in range(n):
+        if labels[i] == best:
+            ws += weights[i]
+            cnt += 1
+    uniform = not ws > 0.0
+    mx = my = cc = ss = 0.0
+    for i in range(n):
+        if labels[i] == best:
+            w = 1.0 / cnt if uniform else weights[i] / ws
+            mx += w * particles[i, 0]
+            my += w * particles[i, 1]
+            cc += w * np.cos(particles[i, 2])
+            ss += w * np.sin(particles[i, 2])
+    cxx = cxy = cyy = 0.0
+    for i in range(n):
+        if labels[i] == best:
+            w = 1.0 / cnt if uniform else weights[i] / ws
+            dx = particles[i, 0] - mx
+            dy = particles[i, 1] - my
+            cxx += w * dx * dx
+            cxy += w * dx * dy
+            cyy += w * dy * dy
+    mean = np.array([mx, my, np.arctan2(ss, cc)])
+    cov = np.zeros((3, 3))
+    cov[0, 0] = cxx
+    cov[0, 1] = cov[1, 0] = cxy
+    cov[1, 1] = cyy
+    r = min(max(np.hypot(cc, ss), 1e-12), 1.0)
+    cov[2, 2] = -2.0 * np.log(r)
+    return mean, cov
+
+
+@njit(cache=True)
+def converged_kernel(particles, dist):
+    """AMCL's pf->converged: every particle within ``dist`` of the mean in x and in y."""
+    n = particles.shape[0]
+    mx = 0.0
+    my = 0.0
+    for i in range(n):
+        mx += particles[i, 0]
+        my += particles[i, 1]
+    mx /= n
+    my /= n
+    for i in range(n):
+        if abs(particles[i, 0] - mx) > dist or abs(particles[i, 1] - my) > dist:
+            return False
+    return True

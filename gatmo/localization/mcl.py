@@ -19,7 +19,7 @@ from gatmo.errors import MapError
 from gatmo.geometry import compose, relative, wrap_angle
 from gatmo.localization.config import AmclConfig
 from gatmo.localization.motion import sample_motion
-from gatmo.localization.particles import cluster_estimate, kld_resample
+from gatmo.localization.particles import cluster_estimate, is_converged, kld_resample
 from gatmo.localization.sensor import SensorModel
 from gatmo.maps.grid import OCCUPIED, OccupancyGrid
 from gatmo.maps.likelihood import LikelihoodField
@@ -71,7 +71,7 @@ class MonteCarloLocalizer:
         self.cfg = cfg
         self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
         self.field = LikelihoodField(grid.copy(), cfg.laser_likelihood_max_dist_m)
-        self.sensor = SensorModel(self.field, cfg)
+        self.sensor = SensorModel(self.field, cfg, ray_caster=cfg.beam_ray_caster)
         self._free_xy: np.ndarray | None = None
         self.particles = np.zeros((0, 3))
         self.weights = np.zeros(0)
@@ -269,6 +269,4 @@ class MonteCarloLocalizer:
         self.weights = np.full(len(new), 1.0 / len(new))
 
     def _is_converged(self) -> bool:
-        mean = self.particles[:, :2].mean(axis=0)
-        d = np.abs(self.particles[:, :2] - mean)
-        return bool(np.all(d <= self.cfg.converged_dist_m))
+        return is_converged(self.particles, self.cfg.converged_dist_m)

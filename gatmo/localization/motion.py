@@ -1,6 +1,10 @@
 """Odometry motion models of nav2_amcl (``DifferentialMotionModel``, ``OmniMotionModel``) and
 ROS 1 AMCL's originals, which pass a variance where a standard deviation belongs (kept under
-their ROS 1 names ``diff`` and ``omni`` for parity; the ``-corrected`` ones are the default)."""
+their ROS 1 names ``diff`` and ``omni`` for parity; the ``-corrected`` ones are the default).
+
+:func:`sample_motion` draws the noise as standard normals (3, N) and moves the particles with a
+numba kernel; :func:`sample_motion_reference` is the same in numpy on given normals.
+"""
 
 from __future__ import annotations
 
@@ -13,18 +17,19 @@ def _angle_diff(a, b):
     return wrap_angle(np.asarray(a) - np.asarray(b))
 
 
-def sample_motion(particles: np.ndarray, odom_prev: np.ndarray, odom_now: np.ndarray,
-                  model: str, alphas: tuple[float, ...], rng: np.random.Generator) -> np.ndarray:
-    """Move particles (N, 3) by the odometry step ``odom_prev -> odom_now`` (odom frame) with
-    noise; returns new particles (N, 3). ``alphas`` = (alpha1..alpha5)."""
+def motion_terms(odom_prev: np.ndarray, odom_now: np.ndarray, model: str,
+                 alphas: tuple[float, ...]) -> tuple[str, tuple[float, ...]]:
+    """The odometry step's decomposition and noise standard deviations.
+
+    ``("diff", (rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2))`` or
+    ``("omni", (bearing, trans, dtheta, sd_trans, sd_rot, sd_strafe))``; bearing relative to the
+    heading."""
     a1, a2, a3, a4, a5 = alphas
-    n = len(particles)
     dx, dy = odom_now[0] - odom_prev[0], odom_now[1] - odom_prev[1]
     dth = float(_angle_diff(odom_now[2], odom_prev[2]))
     trans = float(np.hypot(dx, dy))
     corrected = model.endswith("-corrected")
     sd = np.sqrt if corrected else (lambda v: v)  # ROS 1: variance used as a std
-    out = particles.copy()
     if model.startswith("diff"):
         rot1 = 0.0 if trans < 0.01 else float(_angle_diff(np.arctan2(dy, dx), odom_prev[2]))
         rot2 = float(_angle_diff(dth, rot1))
@@ -33,24 +38,54 @@ def sample_motion(particles: np.ndarray, odom_prev: np.ndarray, odom_now: np.nda
         s1 = sd(a1 * r1n**2 + a2 * trans**2)
         st = sd(a3 * trans**2 + a4 * r1n**2 + a4 * r2n**2)
         s2 = sd(a1 * r2n**2 + a2 * trans**2)
-        rot1_hat = _angle_diff(rot1, rng.normal(0.0, 1.0, n) * s1)
-        trans_hat = trans - rng.normal(0.0, 1.0, n) * st
-        rot2_hat = _angle_diff(rot2, rng.normal(0.0, 1.0, n) * s2)
-        out[:, 0] += trans_hat * np.cos(particles[:, 2] + rot1_hat)
-        out[:, 1] += trans_hat * np.sin(particles[:, 2] + rot1_hat)
-        out[:, 2] = wrap_angle(particles[:, 2] + rot1_hat + rot2_hat)
-        return out
+        return "diff", (rot1, trans, rot2, float(s1), float(st), float(s2))
     if model.startswith("omni"):
         st = sd(a3 * trans**2 + a1 * dth**2)
         sr = sd(a4 * dth**2 + a2 * trans**2)
         ss = sd(a1 * dth**2 + a5 * trans**2)
-        bearing = float(_angle_diff(np.arctan2(dy, dx), odom_prev[2])) + particles[:, 2]
-        cb, sb = np.cos(bearing), np.sin(bearing)
-        t_hat = trans + rng.normal(0.0, 1.0, n) * st
-        r_hat = dth + rng.normal(0.0, 1.0, n) * sr
-        s_hat = rng.normal(0.0, 1.0, n) * ss
-        out[:, 0] += t_hat * cb + s_hat * sb
-        out[:, 1] += t_hat * sb - s_hat * cb
-        out[:, 2] = wrap_angle(particles[:, 2] + r_hat)
-        return out
+        bearing = float(_angle_diff(np.arctan2(dy, dx), odom_prev[2]))
+        return "omni", (bearing, trans, dth, float(st), float(sr), float(ss))
     raise ValueError(f"unknown odometry model {model!r}")
+
+
+def sample_motion(particles: np.ndarray, odom_prev: np.ndarray, odom_now: np.ndarray,
+                  model: str, alphas: tuple[float, ...], rng: np.random.Generator,
+                  normals: np.ndarray | None = None) -> np.ndarray:
+    """Move particles (N, 3) by the odometry step ``odom_prev -> odom_now`` (odom frame) with
+    noise; returns new particles (N, 3). ``alphas`` = (alpha1..alpha5). ``normals`` (3, N):
+    the standard normals to use (default: drawn from ``rng``)."""
+    from gatmo.localization import _kernels as K
+
+    kind, terms = motion_terms(odom_prev, odom_now, model, alphas)
+    if normals is None:
+        normals = rng.standard_normal((3, len(particles)))
+    parts = np.ascontiguousarray(particles, dtype=np.float64)
+    kern = K.motion_diff_kernel if kind == "diff" else K.motion_omni_kernel
+    return kern(parts, *terms, np.ascontiguousarray(normals, dtype=np.float64))
+
+
+def sample_motion_reference(particles: np.ndarray, odom_prev: np.ndarray, odom_now: np.ndarray,
+                            model: str, alphas: tuple[float, ...],
+                            normals: np.ndarray) -> np.ndarray:
+    """numpy reference of :func:`sample_motion` on the given standard normals (3, N)."""
+    kind, terms = motion_terms(odom_prev, odom_now, model, alphas)
+    out = particles.copy()
+    th = particles[:, 2]
+    if kind == "diff":
+        rot1, trans, rot2, s1, st, s2 = terms
+        rot1_hat = _angle_diff(rot1, normals[0] * s1)
+        trans_hat = trans - normals[1] * st
+        rot2_hat = _angle_diff(rot2, normals[2] * s2)
+        out[:, 0] += trans_hat * np.cos(th + rot1_hat)
+        out[:, 1] += trans_hat * np.sin(th + rot1_hat)
+        out[:, 2] = wrap_angle(th + rot1_hat + rot2_hat)
+        return out
+    bearing, trans, dth, st, sr, ss = terms
+    cb, sb = np.cos(bearing + th), np.sin(bearing + th)
+    t_hat = trans + normals[0] * st
+    r_hat = dth + normals[1] * sr
+    s_hat = normals[2] * ss
+    out[:, 0] += t_hat * cb + s_hat * sb
+    out[:, 1] += t_hat * sb - s_hat * cb
+    out[:, 2] = wrap_angle(th + r_hat)
+    return out
