@@ -9,6 +9,7 @@ the last estimate carried forward by odometry (what AMCL's map->odom transform g
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -16,13 +17,30 @@ import numpy as np
 
 from gatmo.datasets.types import Scan
 from gatmo.errors import MapError
-from gatmo.geometry import compose, relative, wrap_angle
+from gatmo.geometry import wrap_angle
 from gatmo.localization.config import AmclConfig
 from gatmo.localization.motion import sample_motion
 from gatmo.localization.particles import cluster_estimate, is_converged, kld_resample
 from gatmo.localization.sensor import SensorModel
 from gatmo.maps.grid import OCCUPIED, OccupancyGrid
 from gatmo.maps.likelihood import LikelihoodField
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _compose(a, b) -> np.ndarray:
+    """:func:`gatmo.geometry.compose` of two single poses with scalar math (per-scan cost)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], _wrap(a[2] + b[2])])
+
+
+def _relative(a, b) -> np.ndarray:
+    """:func:`gatmo.geometry.relative` (pose b in the frame of a) of two single poses."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, _wrap(b[2] - a[2])])
 
 
 @dataclass
@@ -174,7 +192,7 @@ class MonteCarloLocalizer:
         if self._odom_at_update is None:
             self._odom_at_update = odom.copy()
             self._odom_last = odom.copy()
-        step = relative(self._odom_last, odom)
+        step = _relative(self._odom_last, odom)
         if np.hypot(step[0], step[1]) > c.odom_jump_m or abs(step[2]) > c.odom_jump_rad:
             # wheel slip or an odometry reset: restart around the last estimate
             self.stats.odom_resets += 1
@@ -208,7 +226,7 @@ class MonteCarloLocalizer:
             self._est, self._cov = cluster_estimate(self.particles, self.weights)
             self._converged = self._is_converged()
             self.stats.update_ms.append((time.perf_counter() - t0) * 1e3)
-        pose = compose(self._est, relative(self._odom_at_update, odom))
+        pose = _compose(self._est, _relative(self._odom_at_update, odom))
         return PoseEstimate(float(scan.stamp_s), pose, self._cov.copy(), len(self.particles),
                             self._converged, updated, n_beams)
 

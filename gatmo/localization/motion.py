@@ -8,13 +8,16 @@ numba kernel; :func:`sample_motion_reference` is the same in numpy on given norm
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from gatmo.geometry import wrap_angle
 
 
-def _angle_diff(a, b):
-    return wrap_angle(np.asarray(a) - np.asarray(b))
+def _angle_diff(a: float, b: float) -> float:
+    """wrap_angle(a - b) of scalars (Python's float % has numpy's sign convention)."""
+    return (a - b + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def motion_terms(odom_prev: np.ndarray, odom_now: np.ndarray, model: str,
@@ -24,27 +27,27 @@ def motion_terms(odom_prev: np.ndarray, odom_now: np.ndarray, model: str,
     ``("diff", (rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2))`` or
     ``("omni", (bearing, trans, dtheta, sd_trans, sd_rot, sd_strafe))``; bearing relative to the
     heading."""
-    a1, a2, a3, a4, a5 = alphas
-    dx, dy = odom_now[0] - odom_prev[0], odom_now[1] - odom_prev[1]
-    dth = float(_angle_diff(odom_now[2], odom_prev[2]))
-    trans = float(np.hypot(dx, dy))
-    corrected = model.endswith("-corrected")
-    sd = np.sqrt if corrected else (lambda v: v)  # ROS 1: variance used as a std
+    a1, a2, a3, a4, a5 = (float(a) for a in alphas)
+    p0, p1, p2 = (float(v) for v in odom_prev[:3])
+    dx, dy = float(odom_now[0]) - p0, float(odom_now[1]) - p1
+    dth = _angle_diff(float(odom_now[2]), p2)
+    trans = math.hypot(dx, dy)
+    sd = math.sqrt if model.endswith("-corrected") else (lambda v: v)  # ROS 1: variance as std
     if model.startswith("diff"):
-        rot1 = 0.0 if trans < 0.01 else float(_angle_diff(np.arctan2(dy, dx), odom_prev[2]))
-        rot2 = float(_angle_diff(dth, rot1))
-        r1n = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, np.pi)))
-        r2n = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, np.pi)))
+        rot1 = 0.0 if trans < 0.01 else _angle_diff(math.atan2(dy, dx), p2)
+        rot2 = _angle_diff(dth, rot1)
+        r1n = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
+        r2n = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
         s1 = sd(a1 * r1n**2 + a2 * trans**2)
         st = sd(a3 * trans**2 + a4 * r1n**2 + a4 * r2n**2)
         s2 = sd(a1 * r2n**2 + a2 * trans**2)
-        return "diff", (rot1, trans, rot2, float(s1), float(st), float(s2))
+        return "diff", (rot1, trans, rot2, s1, st, s2)
     if model.startswith("omni"):
         st = sd(a3 * trans**2 + a1 * dth**2)
         sr = sd(a4 * dth**2 + a2 * trans**2)
         ss = sd(a1 * dth**2 + a5 * trans**2)
-        bearing = float(_angle_diff(np.arctan2(dy, dx), odom_prev[2]))
-        return "omni", (bearing, trans, dth, float(st), float(sr), float(ss))
+        bearing = _angle_diff(math.atan2(dy, dx), p2)
+        return "omni", (bearing, trans, dth, st, sr, ss)
     raise ValueError(f"unknown odometry model {model!r}")
 
 
@@ -73,9 +76,9 @@ def sample_motion_reference(particles: np.ndarray, odom_prev: np.ndarray, odom_n
     th = particles[:, 2]
     if kind == "diff":
         rot1, trans, rot2, s1, st, s2 = terms
-        rot1_hat = _angle_diff(rot1, normals[0] * s1)
+        rot1_hat = wrap_angle(rot1 - normals[0] * s1)
         trans_hat = trans - normals[1] * st
-        rot2_hat = _angle_diff(rot2, normals[2] * s2)
+        rot2_hat = wrap_angle(rot2 - normals[2] * s2)
         out[:, 0] += trans_hat * np.cos(th + rot1_hat)
         out[:, 1] += trans_hat * np.sin(th + rot1_hat)
         out[:, 2] = wrap_angle(th + rot1_hat + rot2_hat)
