@@ -162,8 +162,10 @@ def run_side(
     progress: Progress | None = None,
     offset: int = 0,
     total: int | None = None,
+    observer=None,
 ) -> RunTrace:
-    """Step a stack through one log's scans."""
+    """Step a stack through one log's scans. ``observer`` (e.g. a
+    :class:`gatmo.pipeline.live.RerunObserver`) sees every step; its time is not in ``ms``."""
     stack.begin_run(run_id)
     n = len(scans)
     stamps = np.empty(n)
@@ -183,13 +185,18 @@ def run_side(
         resets += int(step.reset)
         for ev in step.events:
             events.append(_event_dict(ev, scan_index=i))
+        if observer is not None:
+            observer.on_step(side, i, scan, step, stack)
         if progress is not None and (i % 20 == 0 or i == n - 1):
             progress(offset + i + 1, total)
     t0 = time.perf_counter()
-    for ev in stack.end_run():
+    end_events = list(stack.end_run())
+    for ev in end_events:
         events.append(_event_dict(ev, scan_index=n))
     if n:
         ms[-1] += (time.perf_counter() - t0) * 1e3
+    if observer is not None:
+        observer.on_run_end(side, stack, end_events)
     return RunTrace(
         log=log,
         side=side,
@@ -424,8 +431,11 @@ def compare(
     keep_traces: bool = False,
     config=None,
     sides: Sequence[str] = SIDES,
+    observer=None,
 ) -> CompareResult:
-    """``gatmo compare``: static localizer vs full stack on the same logs, same seeds."""
+    """``gatmo compare``: static localizer vs full stack on the same logs, same seeds.
+
+    ``observer``: a live view (:class:`gatmo.pipeline.live.RerunObserver`) or None."""
     from gatmo.maps.io import load_map
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
@@ -446,6 +456,8 @@ def compare(
         relations = read_relations(relations_path)
 
     mapper = _make_mapper(cfg, base, None)
+    if observer is not None:
+        observer.on_map("static", base)
     scenario, ties = None, {}
     if scenario_json is not None:
         from gatmo.datasets.sim import load_scenario
@@ -467,10 +479,14 @@ def compare(
         name = f"{k + 1:02d}_{Path(log).stem.split('.')[0]}"
         total = 2 * len(scans)
         grid_before = mapper.grid()
+        if observer is not None:
+            observer.on_log(k, name, np.array([s.stamp_s for s in scans]), gt)
+            observer.on_map("gatmo", grid_before)
+            observer.on_objects(mapper.object_map.objects)
 
         static = LocalizationStack(make_localizer(cfg, base, seed, pose0, pose0 is None))
         t_static = run_side(static, scans, log=str(log), side="static", run_id=k + 1,
-                            progress=_offset(progress, done), total=None)
+                            progress=_offset(progress, done), total=None, observer=observer)
         gat = LocalizationStack(
             make_localizer(cfg, grid_before, seed, pose0, pose0 is None),
             make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
@@ -478,7 +494,8 @@ def compare(
             cfg.fusion,
         )
         t_gatmo = run_side(gat, scans, log=str(log), side="gatmo", run_id=k + 1,
-                           progress=_offset(progress, done + len(scans)), total=None)
+                           progress=_offset(progress, done + len(scans)), total=None,
+                           observer=observer)
         done += total
         write_trace(t_static, out / "static" / name)
         write_trace(t_gatmo, out / "gatmo" / name)
