@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -132,8 +134,10 @@ def test_rerun_url_streams_to_a_viewer_server(scen, tmp_path):
     """A headless ``rerun --save`` server stands in for a viewer on another machine."""
     port = _free_port()
     got = tmp_path / "received.rrd"
+    # its own process group: the pip-installed `rerun` is a wrapper that starts the binary
     server = subprocess.Popen([_viewer(), "--port", str(port), "--save", str(got)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
     try:
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
@@ -146,7 +150,7 @@ def test_rerun_url_streams_to_a_viewer_server(scen, tmp_path):
                    "--rerun-url", f"rerun+http://127.0.0.1:{port}/proxy"])
         assert rc == 0
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=20)
     rows, static, _ = _read_rrd(got)
     assert rows["/world/static/pose"] == rows["/world/gatmo/pose"] == 40
