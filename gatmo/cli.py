@@ -323,12 +323,24 @@ def batch(
     with bar:
         res = run_batch(spec, out, backend=backend, address=address, workers=workers,
                         progress=update)
+    from rich.markup import escape
+
     d = res.as_dict()
     failed = d.pop("failed_jobs", [])
     _print_mapping(f"batch -> {out}", d)
-    for f in failed[:10]:
-        _console().print(f"[red]failed:[/red] {f}")
-    if d.get("failed"):
+    shown = 20
+    for f in failed[:shown]:  # one line each, never wrapped: folder, then the error
+        _console().print(f"[red]failed:[/red] {escape(f['folder'])}: {escape(str(f['error']))}",
+                         soft_wrap=True)
+    if len(failed) > shown:
+        _console().print(f"... and {len(failed) - shown} more failed jobs", soft_wrap=True)
+    if res.code_changed:
+        _console().print("[yellow]warning:[/yellow] gatmo's source files changed while the batch "
+                         "ran: jobs whose workers saw the change failed (CodeMismatch or "
+                         "CodeChanged); running the batch again does them", soft_wrap=True)
+    if failed:
+        _console().print(f"failed jobs (folder, log, error): {escape(str(res.out_dir))}/batch.json",
+                         soft_wrap=True)
         raise typer.Exit(1)
 
 

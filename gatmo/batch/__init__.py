@@ -1,7 +1,10 @@
 """``gatmo batch``: many (map, log, parameter point, seed) jobs on a process pool or Ray.
 
 Each job writes its own folder (``DONE.json`` last: the checkpoint a re-run skips on);
-``results.parquet``/``results.csv`` gathers one row per job and ``batch.json`` the counts.
+``results.parquet``/``results.csv`` gathers one row per job and ``batch.json`` the counts and
+every failed job (folder, log, error). A batch runs on the gatmo sources it started with: a
+worker holding other code fails its jobs with ``CodeMismatch``/``CodeChanged`` instead of
+mixing versions (see :func:`gatmo.batch.jobs.code_error`).
 """
 
 from __future__ import annotations
@@ -25,12 +28,15 @@ class BatchResult:
     scans_per_s: float
     seconds: float
     failed_jobs: list = field(default_factory=list)
+    # gatmo's source files changed while the batch ran: its jobs may mix code versions
+    code_changed: bool = False
 
     def as_dict(self) -> dict:
         return {"out_dir": str(self.out_dir), "jobs": self.jobs, "ok": self.ok,
                 "failed": self.failed, "skipped": self.skipped,
                 "results_path": str(self.results_path), "scans_per_s": self.scans_per_s,
-                "seconds": self.seconds, "failed_jobs": self.failed_jobs}
+                "seconds": self.seconds, "code_changed": self.code_changed,
+                "failed_jobs": self.failed_jobs}
 
 
 def run_batch(spec_path: str | Path, out_dir: str | Path, *, backend: str = "local",
@@ -40,7 +46,7 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, backend: str = "loc
 
     ``scans_per_s``: scans of the jobs run now (not skipped) / wall-clock seconds of the batch."""
     from gatmo.batch.backends import run_local, run_ray
-    from gatmo.batch.jobs import finished_result, map_bundle
+    from gatmo.batch.jobs import finished_result, map_bundle, source_fingerprint
     from gatmo.batch.results import make_rows, write_batch_json, write_table
     from gatmo.batch.spec import apply_overrides, base_stack_config
     from gatmo.errors import ConfigError
@@ -78,28 +84,38 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, backend: str = "loc
                 cfg = base_stack_config(j.params_path)
                 apply_overrides(cfg, j.point)
                 stack_cfgs[j.point_hash] = cfg.model_dump(mode="json")
+    code = source_fingerprint()
     t0 = time.perf_counter()
     if backend == "local":
-        got = run_local(todo, str(out), stack_cfgs, workers=workers, progress=progress)
+        got = run_local(todo, str(out), stack_cfgs, workers=workers, progress=progress,
+                        code=code)
     else:
         bundles = {j.map_name: map_bundle(j.map_yaml) for ch in todo for j in ch}
         got = run_ray(todo, str(out), stack_cfgs, bundles, address=address, workers=workers,
-                      progress=progress)
+                      progress=progress, code=code)
     seconds = time.perf_counter() - t0
+    code_after = source_fingerprint()
     for r in got:
-        results.setdefault(r["id"], r)
+        if r["id"] in results:
+            continue  # finished before this run (the head of a resumed chain)
+        if r["status"] == "skipped":
+            # finished during this run by an attempt whose worker then died: the retry found
+            # its checkpoint, but the job did run now
+            r = dict(r, status="ok")
+        results[r["id"]] = r
     param_keys = list(spec.grid)
     rows = make_rows(jobs, results, param_keys)
     path = write_table(rows, out)
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("ok", "failed", "skipped")}
     scans = sum(float(results[j.id]["summary"].get("scans") or 0) for j in jobs
                 if results[j.id]["status"] == "ok")
-    failed = [{"job_id": r["job_id"], "folder": r["folder"], "error": r["error"]}
-              for r in rows if r["status"] == "failed"]
+    failed = [{"job_id": r["job_id"], "folder": r["folder"], "log": r["log"],
+               "error": r["error"]} for r in rows if r["status"] == "failed"]
     res = BatchResult(out, len(jobs), counts["ok"], counts["failed"], counts["skipped"], path,
-                      scans / seconds if seconds > 0 else 0.0, seconds, failed)
-    write_batch_json(dict(res.as_dict(), backend=backend, spec=str(Path(spec_path).resolve())),
-                     out)
+                      scans / seconds if seconds > 0 else 0.0, seconds, failed,
+                      code_changed=code_after != code)
+    write_batch_json(dict(res.as_dict(), backend=backend, spec=str(Path(spec_path).resolve()),
+                          code_fingerprint=[code, code_after]), out)
     return res
 
 

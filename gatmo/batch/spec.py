@@ -2,7 +2,9 @@
 expanded into a list of :class:`Job` grouped into dependency chains.
 
 A job is a pure function of (command, map, log(s), parameter point, seed); its id is a stable
-hash of exactly those, and its folder is readable:
+hash of those inputs - the map's YAML and image bytes, the params file's bytes, each log's path,
+size and modification time, the point, the seed and ``max_scans`` - so a checkpoint stops
+counting once any of them changes. Its folder is readable:
 ``<command>/<site-or-log-stem>/<param-hash>/seed<k>`` (jobs of one log under a ``site`` add
 ``/<log-stem>``, so that the runs of a site sit side by side).
 """
@@ -139,6 +141,9 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
                               line=lines.get(("params",)), field="params")
         params_path = str(q.resolve())
 
+    map_digest = {name: _map_digest(p) for name, p in maps.items()}
+    params_digest = _digest([Path(params_path).read_bytes()]) if params_path else None
+
     keys = list(spec.grid)
     for k in keys:
         if not spec.grid[k]:
@@ -163,11 +168,13 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
         for point in points:
             ph = _hash([list(p) for p in point], 8)
             for seed in spec.seeds:
-                def job(logs, label, pos=0, sub=None, _point=point, _ph=ph, _seed=seed,
-                        _entry=entry):
-                    jid = _hash([spec.command, maps[_entry.map], list(logs),
+                def job(logs, label, pos=0, sub=None, prev=None, _point=point, _ph=ph,
+                        _seed=seed, _entry=entry):
+                    # a chained run's input includes its predecessor (whose objects it reads)
+                    jid = _hash([spec.command, maps[_entry.map], map_digest[_entry.map],
+                                 [[lg, *_stat(lg)] for lg in logs],
                                  [list(p) for p in _point], _seed, spec.max_scans,
-                                 params_path])
+                                 params_path, params_digest, prev])
                     folder = f"{spec.command}/{label}/{_ph}/seed{_seed}"
                     if sub is not None:
                         folder += f"/{sub}"
@@ -178,22 +185,57 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
                 if spec.command == "compare":
                     chains.append([job(files, entry.site or entry.map)])
                 elif entry.site is not None and spec.command in ("run", "echo"):
-                    chains.append([job([f], entry.site, k, Path(f).stem)
-                                   for k, f in enumerate(files)])
+                    chain: list[Job] = []
+                    for k, f in enumerate(files):
+                        chain.append(job([f], entry.site, k, Path(f).stem,
+                                         chain[-1].id if chain else None))
+                    chains.append(chain)
                 else:
                     for f in files:
                         if entry.site is not None:  # several logs per site: one folder each
                             chains.append([job([f], entry.site, sub=Path(f).stem)])
                         else:
                             chains.append([job([f], Path(f).stem)])
+    # the same job listed twice (overlapping globs) runs once
+    unique: dict[tuple[str, ...], list[Job]] = {}
+    for ch in chains:
+        unique.setdefault(tuple(j.id for j in ch), ch)
+    chains = list(unique.values())
     seen: dict[str, str] = {}
+    ids: set[str] = set()
     for ch in chains:
         for j in ch:
+            if j.id in ids:  # overlapping site globs: one run inside two chains
+                raise ConfigError(f"the job in {j.folder} belongs to two chains; give the "
+                                  "logs entries of one site disjoint globs", file=spec_path,
+                                  field="logs")
+            ids.add(j.id)
             if j.folder in seen and seen[j.folder] != j.id:
                 raise ConfigError(f"two jobs would share the folder {j.folder}; give the logs "
                                   "distinct sites or names", file=spec_path, field="logs")
             seen[j.folder] = j.id
     return chains
+
+
+def _digest(blobs) -> str:
+    h = hashlib.sha256()
+    for b in blobs:
+        h.update(hashlib.sha256(b).digest())
+    return h.hexdigest()[:16]
+
+
+def _map_digest(map_yaml: str) -> str:
+    """Hash of the map's files (YAML and image) as shipped to workers."""
+    from gatmo.batch.jobs import map_bundle
+
+    files = map_bundle(map_yaml)["files"]
+    return _digest(files[k] for k in sorted(files))
+
+
+def _stat(path: str) -> list[int]:
+    """A log's identity beyond its path without reading it (logs can be large)."""
+    st = Path(path).stat()
+    return [st.st_size, st.st_mtime_ns]
 
 
 def _check_points(spec, points, params_path, spec_path, lines) -> None:

@@ -11,25 +11,15 @@ from gatmo.batch import run_batch
 from gatmo.batch.results import read_table
 from gatmo.batch.spec import expand_jobs
 from gatmo.errors import ConfigError
-
-MAP_YAML = "image: m.pgm\nresolution: 0.1\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n" \
-           "occupied_thresh: 0.65\nfree_thresh: 0.196\n"
+from tests.batch.world import MAP_YAML, echo_world, write_spec
 
 
 def _echo_world(tmp: Path, logs=("a.log", "b.log"), lines=(3, 5)) -> Path:
-    (tmp / "maps").mkdir()
-    (tmp / "maps" / "m.yaml").write_text(MAP_YAML)
-    (tmp / "maps" / "m.pgm").write_bytes(b"P5\n2 2\n255\n" + bytes(4))
-    (tmp / "logs").mkdir()
-    for name, n in zip(logs, lines, strict=True):
-        (tmp / "logs" / name).write_text("x\n" * n)
-    return tmp
+    return echo_world(tmp, logs, lines)
 
 
 def _spec(tmp: Path, text: str) -> Path:
-    p = tmp / "spec.yaml"
-    p.write_text(text)
-    return p
+    return write_spec(tmp, text)
 
 
 def test_expansion_grid_globs_relative_paths_and_stable_ids(tmp_path):
@@ -177,27 +167,41 @@ grid: {echo.fail: [true]}
     assert res[1]["error"].startswith("ChainError")
 
 
-def test_ray_backend_echo_sweep_with_chain(tmp_path):
-    ray = pytest.importorskip("ray", reason="ray not installed: pip install 'gatmo[ray]'")
+def test_ray_backend_echo_sweep_with_chain(tmp_path, ray_local, monkeypatch):
+    ray = ray_local
     _echo_world(tmp_path, logs=("r1.log", "r2.log"), lines=(2, 4))
+    (tmp_path / "maps" / "n.yaml").write_text(MAP_YAML)
+    (tmp_path / "logs" / "solo.log").write_text("x\n" * 3)
     spec = _spec(tmp_path, """
-maps: {m: maps/m.yaml}
-logs: [{map: m, glob: "logs/r*.log", site: s}]
+maps: {m: maps/m.yaml, n: maps/n.yaml}
+logs:
+  - {map: m, glob: "logs/r*.log", site: s}
+  - {map: n, glob: "logs/solo.log"}
 command: echo
-grid: {echo.k: [1, 2]}
+grid: {echo.k: [1, 2], echo.fail: [false, true]}
 seeds: [0]
 """)
+    puts = []
+    real_put = ray.put
+    monkeypatch.setattr(ray, "put", lambda obj, **kw: puts.append(obj) or real_put(obj, **kw))
     out = tmp_path / "out"
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        res = run_batch(spec, out, backend="ray")
-        assert (res.jobs, res.ok, res.failed) == (4, 4, 0)
-        for chain in expand_jobs(spec):
+    res = run_batch(spec, out, backend="ray")
+    # 4 points x (a chain of 2 + 1 solo job); failing points fail both runs of their chain
+    assert (res.jobs, res.ok, res.failed) == (12, 6, 6)
+    # each map is put in the object store once, not once per job (echo jobs have no stack
+    # config to put; test_ray_localize_sweep counts those)
+    assert len(puts) == 2
+    assert sorted(b["yaml"] for b in puts) == ["m.yaml", "n.yaml"]
+    chains = expand_jobs(spec)
+    for chain in chains:
+        if len(chain) == 2 and not dict(chain[0].point)["echo.fail"]:
             d = json.loads((out / chain[1].folder / "DONE.json").read_text())
             assert d["objects_in"] == str(out / chain[0].folder / "objects.json")
-        assert sorted(int(r["scans"]) for r in read_table(res.results_path)) == [2, 2, 4, 4]
-    finally:
-        ray.shutdown()
+    rows = read_table(res.results_path)
+    assert sorted(r["scans"] for r in rows if r["status"] == "ok") == [2, 2, 3, 3, 4, 4]
+    errors = sorted(r["error"] for r in rows if r["status"] == "failed")
+    assert sum(e.startswith("RuntimeError: echo job asked to fail") for e in errors) == 4
+    assert sum(e.startswith("ChainError: previous run of site 's'") for e in errors) == 2
 
 
 def test_materialize_map_rebuilds_a_missing_map(tmp_path):
@@ -237,13 +241,127 @@ command: echo
 grid:
   echo.fail: [false, true]
 """)
-    rc = main(["batch", str(spec), "--out", str(tmp_path / "out"), "--workers", "1"])
+    out = tmp_path / "out"
+    rc = main(["batch", str(spec), "--out", str(out), "--workers", "1"])
     assert rc == 1  # half the jobs were told to fail
     text = capsys.readouterr().out
-    assert "failed" in text
-    assert (tmp_path / "out" / "batch.json").exists()
-    rc = main(["batch", str(spec), "--out", str(tmp_path / "out"), "--workers", "1"])
+    meta = json.loads((out / "batch.json").read_text())
+    assert (meta["ok"], meta["failed"], meta["skipped"]) == (2, 2, 0)
+    # batch.json and the CLI list every failed job: folder, log and error
+    assert sorted(Path(f["log"]).name for f in meta["failed_jobs"]) == ["a.log", "b.log"]
+    for f in meta["failed_jobs"]:
+        assert f["error"] == "RuntimeError: echo job asked to fail (seed 0)"
+        assert f"failed: {f['folder']}: {f['error']}" in text
+        assert (out / f["folder"] / "FAILED.json").is_file()
+    assert "batch.json" in text
+    rc = main(["batch", str(spec), "--out", str(out), "--workers", "1"])
     assert rc == 1  # failed jobs are redone and fail again; finished ones are skipped
-    import json
+    meta = json.loads((out / "batch.json").read_text())
+    assert (meta["ok"], meta["failed"], meta["skipped"]) == (0, 2, 2)
+    assert len(meta["failed_jobs"]) == 2
 
-    assert json.loads((tmp_path / "out" / "batch.json").read_text())["skipped"] > 0
+
+def test_cli_batch_all_ok_exits_zero_and_lists_nothing(tmp_path, capsys):
+    from gatmo.cli import main
+
+    _echo_world(tmp_path)
+    spec = _spec(tmp_path, "maps: {m: maps/m.yaml}\nlogs: [{map: m, glob: 'logs/*.log'}]\n"
+                           "command: echo\n")
+    assert main(["batch", str(spec), "--out", str(tmp_path / "out"), "--workers", "2"]) == 0
+    assert "failed:" not in capsys.readouterr().out
+    assert json.loads((tmp_path / "out" / "batch.json").read_text())["failed_jobs"] == []
+
+
+def test_overlapping_globs_run_a_job_once_and_chains_must_not_overlap(tmp_path):
+    _echo_world(tmp_path)
+    spec = _spec(tmp_path, """
+maps: {m: maps/m.yaml}
+logs:
+  - {map: m, glob: "logs/*.log"}
+  - {map: m, glob: "logs/a.log"}
+command: echo
+""")
+    jobs = [j for c in expand_jobs(spec) for j in c]
+    assert sorted(Path(j.log).name for j in jobs) == ["a.log", "b.log"]
+    spec.write_text("""
+maps: {m: maps/m.yaml}
+logs:
+  - {map: m, glob: "logs/*.log", site: s}
+  - {map: m, glob: "logs/a.log", site: s}
+command: run
+""")
+    with pytest.raises(ConfigError, match="belongs to two chains"):
+        expand_jobs(spec)
+
+
+def test_checkpoints_follow_the_inputs_contents(tmp_path):
+    """A job's id hashes the map and params files' bytes, each log's size and mtime and, in a
+    chain, its predecessor's id: changing any of them redoes exactly the jobs it feeds."""
+    import os
+
+    _echo_world(tmp_path, logs=("r1.log", "r2.log", "solo.log"), lines=(1, 2, 3))
+    (tmp_path / "p.yaml").write_text("laser_max_beams: 30\n")
+    spec = _spec(tmp_path, """
+maps: {m: maps/m.yaml}
+params: p.yaml
+logs:
+  - {map: m, glob: "logs/r*.log", site: s}
+  - {map: m, glob: "logs/solo.log"}
+command: echo
+""")
+    out = tmp_path / "out"
+    assert run_batch(spec, out, workers=1).ok == 3
+    assert run_batch(spec, out, workers=1).skipped == 3
+    # the first run of the chain changes: it and the run fed by its objects are redone
+    log = tmp_path / "logs" / "r1.log"
+    log.write_text("x\n" * 4)
+    os.utime(log, ns=(log.stat().st_atime_ns, log.stat().st_mtime_ns + 10**9))
+    res = run_batch(spec, out, workers=1)
+    assert (res.ok, res.skipped) == (2, 1)
+    assert sorted(r["scans"] for r in read_table(res.results_path)) == [2, 3, 4]
+    # the params file's contents (same path) invalidate every job
+    (tmp_path / "p.yaml").write_text("laser_max_beams: 60\n")
+    assert run_batch(spec, out, workers=1).ok == 3
+    # the map image's bytes too
+    (tmp_path / "maps" / "m.pgm").write_bytes(b"P5\n2 2\n255\n" + bytes([255] * 4))
+    assert run_batch(spec, out, workers=1).ok == 3
+    assert run_batch(spec, out, workers=1).skipped == 3
+
+
+def test_source_fingerprint_sees_an_edit(tmp_path):
+    from gatmo.batch.jobs import source_fingerprint
+
+    (tmp_path / "pkg").mkdir()
+    mod = tmp_path / "pkg" / "m.py"
+    mod.write_text("x = 1\n")
+    a = source_fingerprint(tmp_path)
+    assert source_fingerprint(tmp_path) == a
+    mod.write_text("x = 22\n")
+    assert source_fingerprint(tmp_path) != a
+    assert len(source_fingerprint()) == 16  # gatmo's own sources
+
+
+def test_ray_address_connects_without_local_resources(tmp_path, monkeypatch):
+    """--address ray://HEAD:10001 goes to ray.init as is, without num_cpus (refused when
+    joining a cluster) or dashboard options; no address starts a local instance."""
+    ray = pytest.importorskip("ray", reason="ray not installed (the ray extra)")
+    from gatmo.batch import backends
+
+    calls = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_init(address=None, **kw):
+        calls.append((address, kw))
+        raise Stop
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", fake_init)
+    with pytest.raises(Stop):
+        backends.run_ray([], str(tmp_path), {}, {}, address="ray://head:10001", workers=8)
+    with pytest.raises(Stop):
+        backends.run_ray([], str(tmp_path), {}, {}, workers=3)
+    assert calls == [("ray://head:10001", {"log_to_driver": False}),
+                     (None, {"log_to_driver": False, "num_cpus": 3,
+                             "include_dashboard": False})]

@@ -45,8 +45,10 @@ def test_localize_sweep_applies_the_grid(scenario, tmp_path):
         assert float(r["ate_rmse_m"]) < 0.5  # tracked, with the sim's initial pose
         poses = tmp_path / "out" / r["folder"] / "poses.tum"
         assert sum(1 for ln in poses.read_text().splitlines() if not ln.startswith("#")) == 60
-    small = [float(r["mean_particles"]) for r in rows if r["amcl.max_particles"] == "500"]
-    big = [float(r["mean_particles"]) for r in rows if r["amcl.max_particles"] == "1000"]
+    # read_table types the values the same way for parquet and CSV
+    assert {r["amcl.max_particles"] for r in rows} == {500, 1000}
+    small = [r["mean_particles"] for r in rows if r["amcl.max_particles"] == 500]
+    big = [r["mean_particles"] for r in rows if r["amcl.max_particles"] == 1000]
     assert max(small) < min(big)
 
 
@@ -95,13 +97,18 @@ max_scans: 20
     assert f["error"].split(":")[0] in ("FormatError", "DataError")
 
 
-def test_ray_localize_sweep(scenario, tmp_path):
-    ray = pytest.importorskip("ray", reason="ray not installed: pip install 'gatmo[ray]'")
-    spec = _spec(Path(scenario.out_dir), "localize", grid="{amcl.max_particles: [500]}")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        res = run_batch(spec, tmp_path / "out", backend="ray")
-    finally:
-        ray.shutdown()
-    assert (res.jobs, res.ok, res.failed) == (2, 2, 0)
-    assert all(int(r["scans"]) == 60 for r in read_table(res.results_path))
+def test_ray_localize_sweep(scenario, tmp_path, ray_local, monkeypatch):
+    spec = _spec(Path(scenario.out_dir), "localize", grid="{amcl.max_particles: [500, 800]}")
+    puts = []
+    real_put = ray_local.put
+    monkeypatch.setattr(ray_local, "put",
+                        lambda obj, **kw: puts.append(obj) or real_put(obj, **kw))
+    res = run_batch(spec, tmp_path / "out", backend="ray")
+    assert (res.jobs, res.ok, res.failed) == (4, 4, 0)
+    # one map and two parameter points in the object store, each put once for the 4 jobs
+    assert len(puts) == 3
+    assert sum(1 for b in puts if "files" in b) == 1
+    assert sorted(c["amcl"]["max_particles"] for c in puts if "amcl" in c) == [500, 800]
+    rows = read_table(res.results_path)
+    assert all(r["scans"] == 60 for r in rows)
+    assert all(r["mean_particles"] <= r["amcl.max_particles"] for r in rows)
