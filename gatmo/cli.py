@@ -277,19 +277,40 @@ def compare(
     scenario: Annotated[
         Path | None, typer.Option("--scenario", help="scenario.json of a simulated scenario.")
     ] = None,
+    rerun: Annotated[
+        bool, typer.Option("--rerun", help="Live view: spawn a Rerun viewer (or use the running "
+                           "one) and stream map, scans, particles, objects, trajectories.")
+    ] = False,
+    rerun_url: Annotated[
+        str | None, typer.Option("--rerun-url", help="Live view in a Rerun viewer elsewhere, "
+                                 "e.g. rerun+http://HOST:9876/proxy (instead of spawning).")
+    ] = None,
+    rerun_save: Annotated[
+        Path | None, typer.Option("--rerun-save", help="Record the live view to FILE.rrd "
+                                  "(open with: rerun FILE.rrd); works with --rerun too.")
+    ] = None,
 ) -> None:
     """Static localizer vs full stack on the same logs, object map carried from log to log."""
+    from contextlib import nullcontext
+
     from gatmo.pipeline.runs import compare as run_compare
 
+    live = nullcontext()
+    if rerun or rerun_url or rerun_save:
+        from gatmo.pipeline.live import RerunObserver
+
+        live = RerunObserver(spawn=rerun, url=rerun_url, save=rerun_save)
     bar, update = _progress("compare")
-    with bar:
+    with live as observer, bar:
         result = run_compare(
             map_yaml, logs, out, params_path=params, config_path=config,
             initial_pose=_parse_pose(initial_pose), global_localization=global_loc,
             gt_paths=ground_truth, relations_path=relations, fmt=fmt, max_scans=max_scans,
-            scenario_json=scenario, progress=update,
+            scenario_json=scenario, progress=update, observer=observer,
         )
     _print_compare(result)
+    if rerun_save is not None:
+        _console().print(f"rerun recording: {rerun_save}")
 
 
 @app.command()
