@@ -101,6 +101,32 @@ def likelihood_table_kernel_serial(particles, laser_pose, bx, by, table, res, ox
     return out
 
 
+@njit(cache=True)
+def unmapped_beams_kernel(particles, laser_pose, ranges, angles, bx, by, unmapped, cells, res, ox,
+                          oy, margin):
+    """Per beam (B,): how many particles put it in unmapped space: its endpoint (bx, by in the
+    laser frame, as for :func:`likelihood_table_kernel`) off the map or on a cell with
+    ``unmapped`` set, *and* no occupied cell on the ray before ``range - margin`` (a ray
+    through a mapped wall contradicts the map wherever it ends)."""
+    n = particles.shape[0]
+    h, w = unmapped.shape
+    counts = np.zeros(bx.shape[0], dtype=np.int64)
+    inv = 1.0 / res
+    for i in range(n):
+        lx, ly, lt = _laser_in_map(particles, i, laser_pose)
+        lc = np.cos(lt)
+        ls = np.sin(lt)
+        for j in range(bx.shape[0]):
+            ix = int(np.floor((lx + lc * bx[j] - ls * by[j] - ox) * inv))
+            iy = int(np.floor((ly + ls * bx[j] + lc * by[j] - oy) * inv))
+            if ix < 0 or iy < 0 or ix >= w or iy >= h or unmapped[iy, ix]:
+                reach = ranges[j] - margin
+                if reach <= 0.0 or _cast_one(cells, res, ox, oy, lx, ly, lt + angles[j], reach,
+                                             False) >= reach:
+                    counts[j] += 1
+    return counts
+
+
 @njit(cache=True, parallel=True)
 def likelihood_field_prob_kernel(particles, laser_pose, ranges, angles, dist, res, ox, oy,
                                  max_dist, z_hit, z_rand, sigma_hit, range_max, use_beam):

@@ -56,6 +56,23 @@ class AmclConfig(GatmoModel):
         None, description="None: use the scan's own range_max (AMCL's -1.0)"
     )
     max_beams: int = Field(60, ge=2)
+    skip_unmapped_beams: bool = Field(
+        True,
+        description=(
+            "likelihood-field models (not an AMCL parameter): leave out the beams that end in "
+            "unmapped space (an unknown cell beyond 3 sigma_hit of every obstacle, or off the "
+            "map) for more than half of the particles; AMCL (false) scores them as misses, "
+            "which pulls the particles towards the map when the robot drives out of it"
+        ),
+    )
+    min_mapped_beam_fraction: float = Field(
+        0.5, ge=0, le=1,
+        description=(
+            "with skip_unmapped_beams: a scan with fewer mapped beams than this fraction of its "
+            "valid beams is not weighed at all (the robot looks mostly into unmapped space; "
+            "the particles move by odometry alone)"
+        ),
+    )
     do_beamskip: bool = False
     beam_skip_distance_m: float = Field(0.5, gt=0)
     beam_skip_threshold: float = Field(0.3, ge=0, le=1)

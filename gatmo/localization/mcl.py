@@ -68,6 +68,7 @@ class LocalizerStats:
     skipped_no_valid_beams: int = 0
     odom_resets: int = 0
     random_injected: int = 0
+    unmapped_beams: int = 0
     map_region_updates: int = 0
     update_ms: list = field(default_factory=list)
 
@@ -76,6 +77,7 @@ class LocalizerStats:
         return {"scans": self.scans, "sensor_updates": self.sensor_updates,
                 "skipped_no_valid_beams": self.skipped_no_valid_beams,
                 "odom_resets": self.odom_resets, "random_injected": self.random_injected,
+                "unmapped_beams": self.unmapped_beams,
                 "map_region_updates": self.map_region_updates,
                 "ms_per_update_median": float(np.median(ms))}
 
@@ -214,6 +216,7 @@ class MonteCarloLocalizer:
             moved = sample_motion(self.particles, self._odom_at_update, odom, c.odom_model,
                                   (c.alpha1, c.alpha2, c.alpha3, c.alpha4, c.alpha5), self.rng)
             logw, n_beams = self.sensor.weigh(moved, scan, self._converged)
+            self.stats.unmapped_beams += getattr(self.sensor, "last_unmapped_beams", 0)
             self.particles = moved
             self._odom_at_update = odom.copy()
             if n_beams == 0:

@@ -7,6 +7,7 @@ import numpy as np
 
 from gatmo.datasets.types import Scan
 from gatmo.errors import ConfigError
+from gatmo.maps.grid import FREE, OCCUPIED
 from gatmo.maps.likelihood import LikelihoodField
 
 
@@ -66,8 +67,38 @@ def beam_reference(particles, laser_pose, ranges, angles, grid, z_hit, z_short, 
     return out
 
 
+def unmapped_beams_reference(particles, laser_pose, ranges, angles, grid, unmapped, margin):
+    """numpy reference of :func:`gatmo.localization._kernels.unmapped_beams_kernel` (B,)."""
+    from gatmo.geometry import compose
+    from gatmo.maps.raycast import cast_rays
+
+    lp = compose(particles, laser_pose[None, :])
+    counts = np.zeros(len(ranges), dtype=np.int64)
+    for pose in lp:
+        a = pose[2] + angles
+        end = np.stack([pose[0] + ranges * np.cos(a), pose[1] + ranges * np.sin(a)], axis=1)
+        c = grid.world_to_cell(end)
+        ok = grid.in_bounds(c)
+        off = ~ok
+        off[ok] = unmapped[c[ok, 1], c[ok, 0]] > 0
+        for j in np.flatnonzero(off):
+            reach = ranges[j] - margin
+            if reach <= 0 or cast_rays(grid, pose, angles[j : j + 1], reach,
+                                       stop_at_unknown=False)[0] >= reach:
+                counts[j] += 1
+    return counts
+
+
 class SensorModel:
-    """Weighs particles against a scan with one of AMCL's laser models."""
+    """Weighs particles against a scan with one of AMCL's laser models.
+
+    With ``cfg.skip_unmapped_beams`` the likelihood-field models leave out the beams that end in
+    unmapped space for most particles (:meth:`mapped_beams`): an unknown cell far from every
+    obstacle says nothing about the pose, while AMCL scores such an endpoint as a miss, which
+    makes every particle that can explain the beam by some mapped wall win, pulling the set
+    towards the map when the robot drives out of it. ``last_unmapped_beams``: how many beams
+    the last :meth:`weigh` left out that way.
+    """
 
     #: beam model ray casters: "march" (exact: jumps on the distance transform, cell walk near
     #: obstacles), "dda" (exact: cell walk all the way, the reference kernel), "lut" (approximate:
@@ -79,10 +110,17 @@ class SensorModel:
     #: ("dda", the reference, is always parallel)
     PARALLEL_MIN_EVALS = {"march": 250_000, "lut": 1_000_000, "field": 4_000_000}
 
+    #: the particles (at most about this many, evenly spaced in the set) that vote on which
+    #: beams end in unmapped space
+    UNMAPPED_VOTERS = 64
+
     def __init__(self, field: LikelihoodField, cfg, ray_caster: str = "march") -> None:
         self.field = field
         self.cfg = cfg
         self.ray_caster = ray_caster
+        self.last_unmapped_beams = 0
+        self._unmapped = None
+        self._unmapped_key = None
         self._table = None
         self._table_key = None
         self._march = None
@@ -112,6 +150,48 @@ class SensorModel:
                     self._table[y0:y1, x0:x1] = pz3(f.dist_m[y0:y1, x0:x1])
             self._table_version = f.version
         return self._table, float(pz3(np.float64(f.max_dist_m)))
+
+    def _unmapped_table(self) -> np.ndarray:
+        """uint8 per cell: 1 where the map says nothing (an unknown cell further than
+        3 sigma_hit from every occupied cell), refreshed by region when the map changes."""
+        f = self.field
+        reach = 3.0 * self.cfg.sigma_hit_m
+
+        def unmapped(cells, dist):
+            return ((cells != FREE) & (cells != OCCUPIED) & (dist >= reach)).astype(np.uint8)
+
+        key = (reach, id(f.dist_m), f.dist_m.shape)
+        if self._unmapped is None or self._unmapped_key != key:
+            self._unmapped = unmapped(f.grid.cells, f.dist_m)
+            self._unmapped_version = f.version
+            self._unmapped_key = key
+        elif self._unmapped_version != f.version:
+            missed = f.version - self._unmapped_version
+            if missed > len(f.changed_windows):
+                self._unmapped = unmapped(f.grid.cells, f.dist_m)
+            else:
+                for x0, y0, x1, y1 in f.changed_windows[-missed:]:
+                    self._unmapped[y0:y1, x0:x1] = unmapped(f.grid.cells[y0:y1, x0:x1],
+                                                            f.dist_m[y0:y1, x0:x1])
+            self._unmapped_version = f.version
+        return self._unmapped
+
+    def mapped_beams(self, particles: np.ndarray, laser_pose: np.ndarray, ranges: np.ndarray,
+                     angles: np.ndarray) -> np.ndarray:
+        """Beams (B,) bool worth weighing: False where, for more than half of the voting
+        particles (up to :attr:`UNMAPPED_VOTERS`, evenly spaced through the set), the endpoint
+        lies in unmapped space (:meth:`_unmapped_table`, or off the map) and the ray gets there
+        without crossing an occupied cell (up to 3 sigma_hit before the endpoint)."""
+        from gatmo.localization import _kernels as K
+
+        g = self.field.grid
+        voters = np.ascontiguousarray(particles[:: max(1, len(particles) // self.UNMAPPED_VOTERS)])
+        counts = K.unmapped_beams_kernel(voters, laser_pose, ranges, angles,
+                                         ranges * np.cos(angles), ranges * np.sin(angles),
+                                         self._unmapped_table(), g.cells, g.resolution_m,
+                                         g.origin_xytheta[0], g.origin_xytheta[1],
+                                         3.0 * self.cfg.sigma_hit_m)
+        return 2 * counts <= len(voters)
 
     def _march_table(self) -> np.ndarray:
         """The beam model's march table, refreshed (by region) when the map changes."""
@@ -193,12 +273,20 @@ class SensorModel:
         beam = c.laser_model == "beam"
         ranges, angles, rmax = select_beams(scan, c.max_beams, c.laser_min_range_m,
                                             c.laser_max_range_m, keep_max_range=beam)
+        self.last_unmapped_beams = 0
         if len(ranges) == 0:
             return np.zeros(len(particles)), 0
         g = self.field.grid
         ox, oy = g.origin_xytheta[:2]
         lp = np.ascontiguousarray(scan.laser_pose_xytheta, dtype=np.float64)
         parts = np.ascontiguousarray(particles, dtype=np.float64)
+        if c.skip_unmapped_beams and not beam:
+            keep = self.mapped_beams(parts, lp, ranges, angles)
+            if not keep.all():
+                self.last_unmapped_beams = int((~keep).sum())
+                if keep.mean() < c.min_mapped_beam_fraction or not keep.any():
+                    return np.zeros(len(particles)), 0
+                ranges, angles = ranges[keep], angles[keep]
         if c.laser_model == "likelihood_field":
             table, off = self._pz3_table(rmax)
             par = len(parts) * len(ranges) >= self.PARALLEL_MIN_EVALS["field"]
