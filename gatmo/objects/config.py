@@ -24,11 +24,14 @@ class GatmoConfig(GatmoModel):
     beta_min_prob: float = Field(0.02, gt=0, lt=1)
     # object map
     wall_min_extent_m: float = Field(2.5, gt=0, description="larger objects are structure")
-    min_object_cells: int = Field(3, ge=1)
+    min_object_cells: int = Field(6, ge=1, description="smaller specks are structure")
     # absence (Alg. 1), made robust
     absence_exclude_end_m: float = Field(0.12, ge=0)
     absence_min_rays: int = Field(20, ge=1)
-    absence_max_range_m: float = Field(6.0, gt=0)
+    absence_max_range_m: float = Field(5.0, gt=0, description="rays and beams beyond: no evidence")
+    absence_near_m: float = Field(0.35, gt=0,
+                                  description="returns this near an object: it is there")
+    absence_near_min_cells: int = Field(3, ge=1, description="cells with 2 returns near it")
     absence_margin_m: float = Field(0.15, ge=0, description="count only cells this far inside")
     absence_beyond_m: float = Field(0.4, gt=0, description="a return this far beyond = gone")
     hit_tolerance_m: float = Field(0.15, gt=0, description="a return this near = there")
@@ -50,6 +53,8 @@ class GatmoConfig(GatmoModel):
     meanshift_bandwidth_m: float = Field(0.35, gt=0)
     min_cluster_points: int = Field(3, ge=1)
     gate_m: float = Field(1.0, gt=0)
+    track_max_range_m: float = Field(5.0, gt=0,
+                                     description="farther returns are too sparse to track")
     # person hypothesis (constant-velocity Kalman filter on the centre)
     person_accel_std: float = Field(1.5, gt=0)
     person_meas_std_m: float = Field(0.1, gt=0)
@@ -66,5 +71,8 @@ class GatmoConfig(GatmoModel):
     match_edge_sigma_m: float = Field(0.05, gt=0)
     match_search_m: float = Field(0.4, gt=0)
     match_search_deg: float = Field(12.0, gt=0)
+    small_object_area_m2: float = Field(
+        0.045, ge=0, description="objects with less occupied area are small: matched only "
+        "within doubt_search_m, absent only with no returns around them")
     lookalike_tolerance: float = Field(0.15, gt=0)
     add_min_cells: int = Field(10, ge=1)

@@ -92,11 +92,14 @@ class GatmoMapper:
         self._next_meta = 1
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._unexplained = np.zeros(self._grid.cells.shape, dtype=np.int32)
+        # returns this run not explained by walls or other structure (on or near an object, or
+        # near nothing): what the absence veto looks at
+        self._near_returns = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._fields: dict[int, EdgeField] = {}
         self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
-                       "skipped_disagreement": 0}
+                       "skipped_disagreement": 0, "absence_vetoed": 0}
         self._ms: list[float] = []
         self._beams = None
         self._reset_run_evidence()
@@ -191,6 +194,7 @@ class GatmoMapper:
         self._meta = []
         self._free[:] = 0
         self._unexplained[:] = 0
+        self._near_returns[:] = 0
         self._reset_run_evidence()
 
     def end_run(self) -> list[Event]:
@@ -245,6 +249,7 @@ class GatmoMapper:
             self.counts["skipped_disagreement"] += 1
             self._expire(stamp_s, events)
             return events
+        self._count_near_returns(pts, lp)
         self._absence(lp, scan, pts, stamp_s, events)
         if events:  # the map changed: explain against the new one
             near_any, explained = self._explained(pts)
@@ -252,10 +257,23 @@ class GatmoMapper:
         cu = self._grid.world_to_cell(un)
         ok = self._grid.in_bounds(cu)
         np.add.at(self._unexplained, (cu[ok, 1], cu[ok, 0]), 1)
-        self._track(un, stamp_s, events)
+        # beyond the paper: a long-range laser's far returns are a beam every 0.2-0.3 m; a
+        # person 15 m away makes a 'chair' that matches any small absent object
+        self._track(un[np.hypot(*(un - lp[:2]).T) <= self.cfg.track_max_range_m], stamp_s,
+                    events)
         self._expire(stamp_s, events)
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
+
+    def _count_near_returns(self, pts: np.ndarray, lp: np.ndarray) -> None:
+        g = self._grid
+        c = g.world_to_cell(pts)
+        ok = g.in_bounds(c)
+        ok &= np.hypot(*(pts - lp[:2]).T) <= self.cfg.absence_max_range_m
+        c = c[ok]
+        own = self._near_owner[c[:, 1], c[:, 0]]
+        keep = (own >= 0) | (self._near_dist[c[:, 1], c[:, 0]] > self.cfg.delta_W_m)
+        np.add.at(self._near_returns, (c[keep, 1], c[keep, 0]), 1)
 
     def _explained(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(near any occupied cell, explained) per point (N,). S_free filtering (paper,
@@ -334,7 +352,11 @@ class GatmoMapper:
             if (frac > c.beta_thresh and self._rays.get(oid, 0) >= c.absence_min_rays
                     and through >= c.absence_min_beams
                     and through >= c.absence_through_fraction * (through + hits)):
-                gone.append(o)
+                if not self._distinctive(o) and self._something_there(o):
+                    self._doubt.add(oid)
+                    self.counts["absence_vetoed"] += 1
+                else:
+                    gone.append(o)
         for o in gone:  # after the loop: marking re-renders and re-indexes the owner grid
             if o.status in ("U", "M"):
                 self._mark_absent(o, stamp_s, events)
@@ -359,14 +381,17 @@ class GatmoMapper:
         own[ok] = self._owner[cells[ok, 1], cells[ok, 0]]
         through = ok & (r > expected + c.absence_beyond_m)
         on = ok & (np.abs(r - expected) <= c.hit_tolerance_m)
-        return own, ok, through, on
+        # beyond absence_max_range_m a heading error of a degree moves a beam by more than a
+        # small object's width: such beams are no evidence for or against an object
+        own_near = np.where(expected <= c.absence_max_range_m, own, -1)
+        return own, ok, through, on, own_near
 
     def _beam_evidence(self, beams) -> set[int]:
         """Beyond Alg. 1, robust to pose errors of a cell or two: the beams the current map says
         should end on an object either pass well beyond it (evidence it is gone) or end on it
         (evidence it is there); beams ending short of it (occluded) say nothing. Adds to the
         run's counts per object id; returns the ids touched by this scan."""
-        own, _, through, on = beams
+        _, _, through, on, own = beams
         objs = self.object_map.objects
         touched = set()
         for i in np.unique(own[own >= 0]):
@@ -521,6 +546,8 @@ class GatmoMapper:
             if self._part_of_larger(o, mt):
                 continue
             dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
+            if dist > self.cfg.doubt_search_m and not self._distinctive(o):
+                continue  # a speck matches any small thing anywhere: only shifts nearby
             if tier == 1:  # placed, seen nowhere yet, not in doubt: only a shift nearby
                 if dist > self.cfg.doubt_search_m:
                     continue
@@ -544,35 +571,72 @@ class GatmoMapper:
         m.matched_object = o.id
         return True
 
+    def _ring_counts(self, o: MapObject, pose_xytheta: np.ndarray, counts: np.ndarray,
+                     r_in_m: float, r_out_m: float, min_hits: int = 2,
+                     own_index: int | None = None) -> tuple[int, int]:
+        """(cells of the object placed at ``pose_xytheta``, cells of the ring ``r_in_m`` <
+        d <= ``r_out_m`` beyond its outline) holding at least ``min_hits`` of ``counts``
+        (a per-cell grid of returns this run). With ``own_index`` (the object's index in the
+        map), ring cells nearer to another object or wall are left out. -1, -1 when the
+        object is off the map."""
+        g = self._grid
+        cells = g.world_to_cell(o.cells_world(pose_xytheta, dense=True))
+        ok = g.in_bounds(cells)
+        if not ok.any():
+            return -1, -1
+        cells = np.unique(cells[ok], axis=0)
+        pad = int(np.ceil(r_out_m / g.resolution_m)) + 1
+        lo = np.maximum(cells.min(axis=0) - pad, 0)
+        hi = np.minimum(cells.max(axis=0) + pad + 1, [g.width, g.height])
+        win = (slice(lo[1], hi[1]), slice(lo[0], hi[0]))
+        mask = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
+        mask[cells[:, 1] - lo[1], cells[:, 0] - lo[0]] = True
+        d = ndimage.distance_transform_edt(~mask) * g.resolution_m
+        ring = (d > r_in_m) & (d <= r_out_m)
+        if own_index is not None:
+            ring &= (self._near_owner[win] == own_index) | \
+                (self._near_dist[win] > self.cfg.delta_W_m)
+        sub = counts[win]
+        return int((sub[mask] >= min_hits).sum()), int((sub[ring] >= min_hits).sum())
+
     def _part_of_larger(self, o: MapObject, mt) -> bool:
         """Beyond the paper: unexplained returns this run just outside the object placed at the
         match (a ring 0.1-0.4 m beyond its outline) mean what was seen is a part of something
         larger; a footstool fits any corner of a desk."""
-        g = self._grid
-        cells = g.world_to_cell(o.cells_world(mt.pose_xytheta, dense=True))
-        ok = g.in_bounds(cells)
-        if not ok.any():
+        inside, outside = self._ring_counts(o, mt.pose_xytheta, self._unexplained, 0.1, 0.4)
+        if inside < 0:
             return True
-        cells = np.unique(cells[ok], axis=0)
-        lo = cells.min(axis=0) - 10
-        hi = cells.max(axis=0) + 11
-        lo = np.maximum(lo, 0)
-        hi = np.minimum(hi, [g.width, g.height])
-        mask = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
-        mask[cells[:, 1] - lo[1], cells[:, 0] - lo[0]] = True
-        d = ndimage.distance_transform_edt(~mask) * g.resolution_m
-        ring = (d > 0.1) & (d <= 0.4)
-        sub = self._unexplained[lo[1]:hi[1], lo[0]:hi[0]]
-        inside = (sub[mask] >= 2).sum()
-        outside = (sub[ring] >= 2).sum()
         return bool(outside > max(3, 0.25 * inside))
+
+    def _something_there(self, o: MapObject) -> bool:
+        """Beyond the paper, for small objects: returns this run on or just around an object
+        the rays see through (within ``absence_near_m`` of its outline, nearer to it than to
+        anything else) mean it is there but not quite where the map has it: a pose error of a
+        few cm, or a short shift. It is then in doubt, not absent, so the chair hypothesis that
+        forms there relocates it (keeping its identity) instead of a false absence and a
+        duplicate added at the end of the run."""
+        idx = self.object_map.objects.index(o)
+        inside, near = self._ring_counts(o, o.pose_xytheta, self._near_returns, 0.0,
+                                         self.cfg.absence_near_m, own_index=idx)
+        return inside + near >= self.cfg.absence_near_min_cells
 
     def _try_match_gamma(self, g: MapObject, o: MapObject, stamp_s, events) -> None:
         pts = g.cells_world()
         mt = match_points(pts, o, self.cfg, self._field(o), prior_yaw=o.pose_xytheta[2])
+        far = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > self.cfg.doubt_search_m
+        if far and not self._distinctive(o):
+            return
         if mt.score >= self.cfg.match_min_score and self._free_consistent(o, mt):
             self.object_map.objects.remove(g)
             self._relocate(o, mt, stamp_s, events)
+
+    def _distinctive(self, o: MapObject) -> bool:
+        """Beyond the paper (its small objects were confused): an object with less than
+        ``small_object_area_m2`` of occupied cells (a table leg, a speck of clutter in a SLAM
+        map) looks like any small thing, a person's legs standing still included, so it is
+        only matched near where it was; and a pose error of a few cm is its own size, so rays
+        pass through it while it stands there: it is absent only with no returns around it."""
+        return len(o.shape_xy) * o.resolution_m**2 >= self.cfg.small_object_area_m2
 
     def _free_consistent(self, o: MapObject, mt) -> bool:
         """Beyond the paper: the object at the matched pose must not cover cells that rays

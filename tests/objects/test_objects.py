@@ -51,6 +51,65 @@ def test_algorithm1_marks_an_object_absent_when_rays_pass_through():
     assert changes and m.pop_map_changes() == []
 
 
+def test_shifted_small_object_is_in_doubt_not_absent_and_relocated_with_its_id():
+    # a 15 x 20 cm object moved 0.3 m sideways: rays pass through its old cells, but its returns
+    # land right beside them; small objects are then in doubt, not absent, until the chair
+    # there relocates them (a false absence would lose it from the map meanwhile)
+    g = room_grid(10, 6, 0.05, boxes=[(5, 2.6, 5.15, 2.8)])
+    world = room_grid(10, 6, 0.05, boxes=[(5, 2.9, 5.15, 3.1)])
+    m = GatmoMapper.from_config(CFG, g)
+    m.begin_run(1)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    events = []
+    for i, x in enumerate(np.linspace(2.0, 3.0, 30)):
+        s = make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=0.1 * i)
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=0.1 * i)
+    assert m.counts["absence_vetoed"] > 0
+    assert [e.kind for e in events] == ["relocated"] and events[0].object_id == box.id
+    assert np.hypot(*(box.pose_xytheta[:2] - [5.075, 3.0])) < 0.06
+
+
+@pytest.mark.parametrize("track_max_range_m, expect", [(5.0, 0), (9.0, 1)])
+def test_far_returns_are_not_tracked(track_max_range_m, expect):
+    # a new box 6.5 m away: its returns are sparse at that range and not tracked by default
+    g = room_grid(10, 6, 0.05)
+    world = room_grid(10, 6, 0.05, boxes=[(7.5, 2.5, 8.0, 3.0)])
+    cfg = CFG.model_copy(update={"track_max_range_m": track_max_range_m})
+    m = GatmoMapper.from_config(cfg, g)
+    m.begin_run(1)
+    for i in range(8):
+        s = make_scan(world, (1.0, 2.75, 0.0), n_beams=181, max_range_m=9.5, stamp_s=0.1 * i)
+        m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=0.1 * i)
+    assert m.stats()["metaobjects"] == expect
+
+
+@pytest.mark.parametrize("small_object_area_m2, relocated", [(0.045, False), (0.0, True)])
+def test_a_speck_is_not_relocated_far_away(small_object_area_m2, relocated):
+    # a 15 cm speck of clutter vanishes and an identical one appears 3.4 m away: by default
+    # that is not taken for the same object (anything small matches it), it is absent and the
+    # new one is tracked as unknown (Gamma)
+    cfg = CFG.model_copy(update={"small_object_area_m2": small_object_area_m2})
+    g = room_grid(10, 6, 0.05, boxes=[(6.0, 2.0, 6.15, 2.15)])
+    world = room_grid(10, 6, 0.05, boxes=[(3.0, 4.0, 3.15, 4.15)])
+    m = GatmoMapper.from_config(cfg, g)
+    m.begin_run(1)
+    speck = [o for o in m.object_map.objects if not o.structure][0]
+    path = [(x, 3.0, 0.0) for x in np.linspace(1.5, 4.5, 40)]
+    path += [(4.5, 3.0, th) for th in np.linspace(0, 3.0, 20)]
+    events = []
+    for i, pose in enumerate(path):
+        s = make_scan(world, pose, n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
+    events += m.end_run()
+    kinds = [(e.kind, e.object_id) for e in events]
+    assert kinds[0] == ("absent", speck.id)
+    assert (("relocated", speck.id) in kinds) == relocated
+    if relocated:
+        assert np.hypot(*(speck.pose_xytheta[:2] - [3.075, 4.075])) < 0.1
+    else:
+        assert speck.status == "A" and [k for k, _ in kinds[1:]] == ["gamma"]
+
+
 def test_no_absence_while_pose_is_not_confident():
     g = room_grid(10, 6, 0.05, boxes=[(5, 2.5, 5.5, 3.0)])
     world = room_grid(10, 6, 0.05)
