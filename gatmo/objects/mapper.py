@@ -204,14 +204,16 @@ class GatmoMapper:
             if m.dominant() == "chair" and m.matched_object is None:
                 self._to_gamma(m, m.last_seen, events)
         self._meta = []
-        for o in list(self.object_map.Gamma):
+        taken = self._grid.occupied.copy()  # the map, and what is added below
+        for o in sorted(self.object_map.Gamma, key=lambda g: -len(g.shape_xy)):
             if len(o.shape_xy) < self.cfg.add_min_cells:
                 continue
             c = self._grid.world_to_cell(o.cells_world())
             ok = self._grid.in_bounds(c)
-            overlap = np.mean(self._grid.occupied[c[ok, 1], c[ok, 0]]) if ok.any() else 1.0
+            overlap = np.mean(taken[c[ok, 1], c[ok, 0]]) if ok.any() else 1.0
             if overlap > 0.3:
                 continue
+            taken[c[ok, 1], c[ok, 0]] = True
             o.status = "M"
             o.record(self.run, self._last_stamp)
             events.append(Event(self._last_stamp, self.run, "added", o.id, o.label, None,
@@ -698,6 +700,17 @@ class GatmoMapper:
         near, _ = self._explained(pts)
         if near.mean() > 0.5:
             return
+        same = self._gamma_overlapping(pts)
+        if same is not None:
+            # the same unknown thing seen again by a new track (people walked in front of it,
+            # the robot came back): one object, its cells the union of both views
+            pts = np.vstack([same.cells_world(), pts])
+            shape, edge, pose = shape_from_points(pts, self._grid.resolution_m)
+            same.shape_xy, same.edge_xy, same.pose_xytheta = shape, edge, pose
+            same.seen_count += 1
+            self._fields.pop(same.id, None)
+            self._cores.pop(same.id, None)
+            return
         shape, edge, pose = shape_from_points(pts, self._grid.resolution_m)
         o = MapObject(self.object_map.next_id, None, "Gamma", pose, shape, edge,
                       resolution_m=self._grid.resolution_m)
@@ -707,6 +720,18 @@ class GatmoMapper:
         events.append(Event(float(stamp_s), self.run, "gamma", o.id, None, None,
                             pose.tolist()))
         self.counts["gamma"] += 1
+
+    def _gamma_overlapping(self, pts: np.ndarray) -> MapObject | None:
+        """The object in Gamma that most of ``pts`` (P, 2) lie on (within delta_W), or None."""
+        from scipy.spatial import cKDTree
+
+        best, best_frac = None, 0.5
+        for g in self.object_map.Gamma:
+            d, _ = cKDTree(g.cells_world()).query(pts, distance_upper_bound=self.cfg.delta_W_m)
+            frac = float(np.mean(np.isfinite(d)))
+            if frac > best_frac:
+                best, best_frac = g, frac
+        return best
 
     def stats(self) -> dict:
         d = dict(self.counts)

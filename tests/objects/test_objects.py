@@ -297,3 +297,23 @@ def test_pose_scoring_kernel_agrees_with_numpy_reference():
     a = score_poses_kernel(val, -1.0, -0.8, 0.04, pts, th, offs, offs)
     b = score_poses_reference(val, -1.0, -0.8, 0.04, pts, th, offs, offs)
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
+def test_a_new_object_seen_by_two_tracks_is_added_once():
+    # a box the map does not have, seen twice with 5 s in between (longer than tau_memory): two
+    # metaobjects expire into Gamma at the same place; they are one object, added once
+    g = room_grid(10, 6, 0.05)
+    world = room_grid(10, 6, 0.05, boxes=[(5.0, 2.5, 5.5, 3.0)])
+    m = GatmoMapper.from_config(CFG, g)
+    m.begin_run(1)
+    away = [(3.0, 2.75, np.pi)] * 50
+    poses = [(3.0, 2.75, 0.0)] * 12 + away + [(3.2, 2.6, 0.0)] * 12 + away
+    events = []
+    for i, p in enumerate(poses):
+        s = make_scan(world, p, n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
+        events += m.update(np.array(p), s, pose_confident=True, stamp_s=0.1 * i)
+    events += m.end_run()
+    assert [e.kind for e in events] == ["gamma", "added"]
+    (new,) = m.object_map.M
+    assert np.hypot(*(new.pose_xytheta[:2] - [5.25, 2.75])) < 0.3
+    assert m.grid().occupied[55, 101]  # the box's front face (x 5.05, y 2.75) is in the map
