@@ -3,6 +3,7 @@ localizer vs the full stack, both with the same configuration and seed. People w
 and clutter comes and goes: GATMO must not make localization worse.
 
     python -m benchmarks.bench_real_compare [--logs intel,aces,mit-csail] [--max-scans N]
+                                            [--demo-config]
 
 Maps and reference poses:
 
@@ -76,6 +77,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--logs", default="intel,aces,mit-csail")
     ap.add_argument("--max-scans", type=int, default=None)
+    ap.add_argument("--demo-config", action="store_true",
+                    help="the demo's likelihood_field_prob (sigma_hit 0.1 m) instead; results "
+                    "under <log>-demo")
     args = ap.parse_args(argv or [])
     if not (DATA / "slam-benchmark").exists():
         print(f"skipped: {DATA} not found (the Kümmerle benchmark logs are needed)")
@@ -91,14 +95,21 @@ def main(argv=None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         map_yaml, gt, pose0 = _prepare(name, out)
         cfg = real_log_config()
+        if args.demo_config:
+            from gatmo.pipeline.config import sim_stack_config
+
+            cfg = sim_stack_config()
+            cfg.amcl.alpha1 = cfg.amcl.alpha2 = cfg.amcl.alpha3 = cfg.amcl.alpha4 = 0.2
+            out = OUT / f"{name}-demo"
         res = compare(map_yaml, [DATA / "slam-benchmark" / f"{name}.sort.bag"], out / "cmp",
                       initial_pose=pose0, gt_paths=[gt],
                       relations_path=DATA / "slam-benchmark" / f"{name}.relations",
                       max_scans=args.max_scans, pictures=True, config=cfg)
-        figures[name] = {r["side"]: {k: r.get(k) for k in KEYS} for r in res.rows
+        key = f"{name}-demo" if args.demo_config else name
+        figures[key] = {r["side"]: {k: r.get(k) for k in KEYS} for r in res.rows
                          if r.get("log") != "all"}
-        for side, r in figures[name].items():
-            print(name, side, {k: round(v, 3) if isinstance(v, float) else v
+        for side, r in figures[key].items():
+            print(key, side, {k: round(v, 3) if isinstance(v, float) else v
                                for k, v in r.items()}, flush=True)
         fig_path.write_text(json.dumps(figures, indent=1, default=str))
     return 0
