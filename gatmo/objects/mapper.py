@@ -29,7 +29,7 @@ from scipy import ndimage
 
 from gatmo.datasets.types import Scan
 from gatmo.geometry import compose, transform_points, wrap_angle
-from gatmo.maps.grid import OccupancyGrid
+from gatmo.maps.grid import FREE, OccupancyGrid
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
 from gatmo.objects.matching import EdgeField, lookalike, match_points
@@ -212,6 +212,11 @@ class GatmoMapper:
             ok = self._grid.in_bounds(c)
             overlap = np.mean(taken[c[ok, 1], c[ok, 0]]) if ok.any() else 1.0
             if overlap > 0.3:
+                continue
+            # beyond the paper: returns in space the static map never knew (through a window,
+            # an open door, past the mapped area) are the unmapped world, not new furniture
+            known = np.mean(self.base.cells[c[ok, 1], c[ok, 0]] == FREE) if ok.any() else 0.0
+            if known < self.cfg.add_min_free_fraction:
                 continue
             taken[c[ok, 1], c[ok, 0]] = True
             o.status = "M"

@@ -317,3 +317,23 @@ def test_a_new_object_seen_by_two_tracks_is_added_once():
     (new,) = m.object_map.M
     assert np.hypot(*(new.pose_xytheta[:2] - [5.25, 2.75])) < 0.3
     assert m.grid().occupied[55, 101]  # the box's front face (x 5.05, y 2.75) is in the map
+
+
+def test_returns_in_space_the_map_never_knew_are_not_added():
+    # the map knows the room up to a wall at x = 6 m with a window; beyond it is unknown. A box
+    # seen through the window and one inside the room: only the one inside joins the map
+    walls = [(6.0, 0.0, 6.1, 2.2), (6.0, 3.3, 6.1, 6.0)]
+    g = room_grid(10, 6, 0.05, boxes=walls)
+    g.cells[2:-2, 123:-2] = -1
+    world = room_grid(10, 6, 0.05, boxes=walls + [(7.0, 2.6, 7.4, 3.0), (4.0, 1.0, 4.5, 1.5)])
+    m = GatmoMapper.from_config(CFG, g)
+    m.begin_run(1)
+    events = []
+    for i in range(20):
+        s = make_scan(world, (2.5, 2.75, 0.0), n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=0.1 * i)
+    events += m.end_run()
+    assert sorted(e.kind for e in events) == ["added", "gamma", "gamma"]
+    (new,) = m.object_map.M
+    assert np.hypot(*(new.pose_xytheta[:2] - [4.25, 1.25])) < 0.3
+    assert len(m.object_map.Gamma) == 1  # the one beyond the window stays seen, never added
