@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -41,9 +42,17 @@ class FusionConfig(GatmoModel):
     jumps against odometry by more than ``max_offset_jump_m`` (recovery injected particles, a
     kidnapping), GATMO waits ``settle_after_jump_m`` of travel: a filter that has just locked
     onto a look-alike place is as confident as one that is right.
+
+    ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
+    estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
+    fused pose (then refined against the map) serves GATMO only. ``fused``: the matcher's
+    pose re-anchored on the filter (paper, Sec. IV-B), locally more precise (Intel relations
+    0.052 m / 0.65 deg against 0.061 m / 0.94 deg) but with larger errors between resets
+    (ATE 7-11 % higher in simulated offices where nothing moved).
     """
 
     use_scan_matcher: bool = True
+    publish_pose: Literal["localizer", "fused"] = "localizer"
     reset_max_std_xy_m: float = 0.15
     reset_max_std_theta_deg: float = 5.0
     absence_max_std_xy_m: float = 0.1
@@ -259,7 +268,8 @@ class LocalizationStack:
         self.n_scans += 1
         return StackStep(
             stamp_s=float(scan.stamp_s),
-            pose_xytheta=pose,
+            pose_xytheta=pose if self.fusion.publish_pose == "fused" else
+            np.array([loc_pose[0], loc_pose[1], float(wrap_angle(loc_pose[2]))]),
             localizer_pose_xytheta=loc_pose,
             cov=np.asarray(est.cov, dtype=float),
             confident=confident,

@@ -70,7 +70,8 @@ def test_offset_reset_makes_matcher_pose_land_on_map_frame():
     n = len(truth)
     loc = ScriptedLocalizer(truth, confident_at=[5], bias=(0.3, 0.0, 0.0))
     matcher = DriftingMatcher(truth, T_match_map=(10.0, -4.0, 1.0))
-    stack = LocalizationStack(loc, matcher, None, FusionConfig(max_travel_without_reset_m=100))
+    fusion = FusionConfig(max_travel_without_reset_m=100, publish_pose="fused")
+    stack = LocalizationStack(loc, matcher, None, fusion)
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(n)]
     # before the first confident update the stack publishes the (biased) localizer; from scan
@@ -85,11 +86,50 @@ def test_offset_reset_makes_matcher_pose_land_on_map_frame():
     assert [r[1] for r in stack.resets] == ["start", "confident"]
 
 
+def test_default_publishes_the_localizer_pose_and_gives_gatmo_the_fused_one():
+    # the localizer is biased (0.3 m, 0.05 rad) and confident once; the matcher is exact in
+    # its own frame
+    truth = _truth()
+    n = len(truth)
+    b = np.array([0.3, 0.0, 0.05])
+    loc = ScriptedLocalizer(truth, confident_at=[5], bias=b)
+
+    class Recorder:
+        def __init__(self):
+            self.poses = []
+
+        def begin_run(self, run_id):
+            pass
+
+        def update(self, pose, scan, *, pose_confident, stamp_s):
+            self.poses.append(np.asarray(pose, dtype=float))
+            return []
+
+        def pop_map_changes(self):
+            return []
+
+    rec = Recorder()
+    fusion = FusionConfig(max_travel_without_reset_m=100, absence_max_std_xy_m=1.0,
+                          absence_max_std_theta_deg=90.0, align_to_map=False)
+    stack = LocalizationStack(loc, DriftingMatcher(truth, (10.0, -4.0, 1.0)), rec, fusion)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in _scans(n)]
+    published = np.array([o.pose_xytheta for o in out])
+    np.testing.assert_allclose(published, truth + b, atol=1e-9)
+    # GATMO got the matcher's pose anchored at the reset (scan 5), which differs from it
+    fused = np.array(rec.poses)
+    for i in range(5, n):
+        np.testing.assert_allclose(fused[i], compose(truth[5] + b, relative(truth[5], truth[i])),
+                                   atol=1e-9)
+    assert np.abs(fused[-1, :2] - published[-1, :2]).max() > 0.01
+
+
 def test_unconfident_localizer_never_moves_the_offset():
     truth = _truth()
     loc = ScriptedLocalizer(truth, confident_at=[0])
     matcher = DriftingMatcher(truth, T_match_map=(0.0, 0.0, 0.0))
-    stack = LocalizationStack(loc, matcher, None, FusionConfig(max_travel_without_reset_m=100))
+    fusion = FusionConfig(max_travel_without_reset_m=100, publish_pose="fused")
+    stack = LocalizationStack(loc, matcher, None, fusion)
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(len(truth))]
     err = np.hypot(*(np.array([o.pose_xytheta for o in out])[:, :2] - truth[:, :2]).T)
@@ -108,7 +148,7 @@ def test_diverged_matcher_falls_back_to_localizer():
             return m
 
     stack = LocalizationStack(loc, Jumpy(truth, (0, 0, 0)), None,
-                              FusionConfig(max_travel_without_reset_m=100))
+                              FusionConfig(max_travel_without_reset_m=100, publish_pose="fused"))
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(len(truth))]
     assert np.hypot(*(out[11].pose_xytheta[:2] - truth[11][:2])) < 1e-9
@@ -128,7 +168,8 @@ def test_offset_not_confirmed_for_a_while_falls_back_to_the_localizer():
     truth = _truth()
     loc = ScriptedLocalizer(truth, confident_at=[0], bias=(0.2, 0.0, 0.0))
     matcher = DriftingMatcher(truth, T_match_map=(0.0, 0.0, 0.0))
-    stack = LocalizationStack(loc, matcher, None, FusionConfig(max_travel_without_reset_m=1.0))
+    fusion = FusionConfig(max_travel_without_reset_m=1.0, publish_pose="fused")
+    stack = LocalizationStack(loc, matcher, None, fusion)
     stack.begin_run(1)
     out = [stack.step(s) for s in _scans(len(truth))]
     travel = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(truth[:, :2], axis=0).T))])
