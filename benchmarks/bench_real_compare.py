@@ -33,18 +33,20 @@ KEYS = ("ate_rmse_m", "ate_median_m", "lost_fraction", "rel_trans_mean_m", "rel_
         "ms_per_scan", "absent", "relocated", "added")
 
 
-def real_log_config():
+def real_log_config(demo_model: bool = False):
     """One configuration for the three logs: the demo's filter settings (update every 0.1 m /
-    0.1 rad, 500-3000 particles) with AMCL's default likelihood field (sigma_hit 0.2 m, z_hit
-    0.5, z_rand 0.5) and odometry alphas (0.2). The demo's sharper likelihood_field_prob with
-    sigma_hit 0.1 m (tuned on the simulator's 4 m laser) loses the robot on ACES and MIT, whose
-    beams reach 50-80 m: a fraction of a degree is a metre there."""
+    0.1 rad, 500-3000 particles) with AMCL's default odometry alphas (0.2) and, unless
+    ``demo_model``, AMCL's default likelihood field (sigma_hit 0.2 m, z_hit 0.5, z_rand 0.5).
+    The demo's sharper likelihood_field_prob with sigma_hit 0.1 m (tuned on the simulator's 4 m
+    laser) loses the robot on ACES and MIT, whose beams reach 50-80 m: a fraction of a degree is
+    a metre there."""
     from gatmo.pipeline.config import sim_stack_config
 
     cfg = sim_stack_config()
     a = cfg.amcl
-    a.laser_model, a.sigma_hit_m, a.z_hit, a.z_rand = "likelihood_field", 0.2, 0.5, 0.5
     a.alpha1 = a.alpha2 = a.alpha3 = a.alpha4 = 0.2
+    if not demo_model:
+        a.laser_model, a.sigma_hit_m, a.z_hit, a.z_rand = "likelihood_field", 0.2, 0.5, 0.5
     return cfg
 
 
@@ -94,12 +96,8 @@ def main(argv=None) -> int:
         out = OUT / name
         out.mkdir(parents=True, exist_ok=True)
         map_yaml, gt, pose0 = _prepare(name, out)
-        cfg = real_log_config()
+        cfg = real_log_config(demo_model=args.demo_config)
         if args.demo_config:
-            from gatmo.pipeline.config import sim_stack_config
-
-            cfg = sim_stack_config()
-            cfg.amcl.alpha1 = cfg.amcl.alpha2 = cfg.amcl.alpha3 = cfg.amcl.alpha4 = 0.2
             out = OUT / f"{name}-demo"
         res = compare(map_yaml, [DATA / "slam-benchmark" / f"{name}.sort.bag"], out / "cmp",
                       initial_pose=pose0, gt_paths=[gt],

@@ -553,11 +553,10 @@ class GatmoMapper:
             if self._part_of_larger(o, mt):
                 continue
             dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
-            if dist > self.cfg.doubt_search_m and not self._distinctive(o):
-                continue  # a speck matches any small thing anywhere: only shifts nearby
-            if tier == 1:  # placed, seen nowhere yet, not in doubt: only a shift nearby
-                if dist > self.cfg.doubt_search_m:
-                    continue
+            # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
+            if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
+                continue
+            if tier == 1:  # a shift nearby counts as much as a doubted object
                 tier = 0
             # tier first; look-alikes: prefer the nearest one
             key = (tier, round(mt.score * 20) / 20, -dist)
@@ -630,12 +629,16 @@ class GatmoMapper:
     def _try_match_gamma(self, g: MapObject, o: MapObject, stamp_s, events) -> None:
         pts = g.cells_world()
         mt = match_points(pts, o, self.cfg, self._field(o), prior_yaw=o.pose_xytheta[2])
-        far = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > self.cfg.doubt_search_m
-        if far and not self._distinctive(o):
+        if not self._distinctive(o) and self._far(o, mt):
             return
         if mt.score >= self.cfg.match_min_score and self._free_consistent(o, mt):
             self.object_map.objects.remove(g)
             self._relocate(o, mt, stamp_s, events)
+
+    def _far(self, o: MapObject, mt) -> bool:
+        """The match ``mt`` puts ``o`` more than ``doubt_search_m`` from where it is."""
+        return bool(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
+                    > self.cfg.doubt_search_m)
 
     def _distinctive(self, o: MapObject) -> bool:
         """Beyond the paper (its small objects were confused): an object with less than
