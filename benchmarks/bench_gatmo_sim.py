@@ -3,6 +3,7 @@ on rearranged halls and offices, the full stack in the same world before anythin
 GATMO's object figures. Seeds are 100.. (never used while tuning, which used seed 3).
 
     python -m benchmarks.bench_gatmo_sim [--seeds 10] [--preset hall] [--runs 4]
+        [--set fusion.align_to_map=false ...] [--tag NAME]
 
 Writes bench-out/gatmo_sim_<preset>.json and prints one line per seed and the totals.
 """
@@ -20,9 +21,22 @@ import numpy as np
 OUT = Path("bench-out")
 
 
-def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None = None) -> dict:
-    from gatmo.datasets.sim import SimConfig, simulate_scenario
+def stack_config(overrides: list[str] | None = None):
+    """The demo's stack config with ``key=value`` overrides (dotted keys, YAML values)."""
+    import yaml
+
+    from gatmo.batch.spec import apply_overrides
     from gatmo.pipeline.config import sim_stack_config
+
+    cfg = sim_stack_config()
+    pairs = [(kv.split("=", 1)[0], yaml.safe_load(kv.split("=", 1)[1])) for kv in overrides or []]
+    apply_overrides(cfg, pairs)
+    return cfg
+
+
+def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None = None,
+             overrides: list[str] | None = None) -> dict:
+    from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.pipeline.runs import compare
 
     sim = SimConfig.for_preset(preset)
@@ -31,7 +45,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
     scen = simulate_scenario(tmp / f"s{seed}", preset=preset, runs=runs, seed=seed, config=sim)
     t0 = time.perf_counter()
     res = compare(scen.map_yaml, scen.logs, tmp / f"c{seed}", scenario_json=scen.scenario_json,
-                  config=sim_stack_config(), pictures=False, keep_traces=True)
+                  config=stack_config(overrides), pictures=False, keep_traces=True)
     outcomes = piece_outcomes(scen, res, tmp / f"c{seed}")
     secs = time.perf_counter() - t0
     # the same world before anything moved: same seed, no rearrangement
@@ -42,8 +56,8 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
     r.add_count = 0
     base = simulate_scenario(tmp / f"b{seed}", preset=preset, runs=runs, seed=seed,
                              config=still)
-    before = compare(base.map_yaml, base.logs, tmp / f"d{seed}", config=sim_stack_config(),
-                     pictures=False)
+    before = compare(base.map_yaml, base.logs, tmp / f"d{seed}",
+                     config=stack_config(overrides), pictures=False)
     g = [x for x in res.rows if x["side"] == "gatmo"]
     out = {
         "seed": seed,
@@ -68,10 +82,11 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
 
 def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     """Per moved piece and run (paper, Table II / Fig. 5): label, outcome (found: right
-    object at the true pose; wrong: its object relocated elsewhere; absent: noticed gone,
-    not found; missed), and for relocations the scan index at which it happened."""
+    object at the true pose; twin: its object at the true pose of an identical piece (the map
+    is right, the identity swapped); wrong: its object relocated elsewhere; absent: noticed
+    gone, not found; missed), and for relocations the scan index at which it happened."""
     from gatmo.maps.object_io import load_objects
-    from gatmo.pipeline.evaluate import expected_pose, placement_error, tie_objects
+    from gatmo.pipeline.evaluate import expected_pose, placement_error, tie_objects, twin_of
 
     doc = json.loads(Path(scen.scenario_json).read_text())
     folders = sorted((cmp_dir / "gatmo").glob("*"))
@@ -92,7 +107,10 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
             if exp is not None and o.status in ("U", "M"):
                 md, cd = placement_error(o, exp)
                 ok = md < 0.1 and cd < 0.15
-            kind = "found" if ok else "wrong" if rel else "absent" if gone else "missed"
+            twin = not ok and o.status in ("U", "M") and \
+                twin_of(o, c["id"], doc["map_objects"], run["objects"]) is not None
+            kind = ("found" if ok else "twin" if twin else "wrong" if rel
+                    else "absent" if gone else "missed")
             out.append({"run": k + 1, "label": c["label"], "outcome": kind,
                         "scan": rel[-1]["scan_index"] if rel else None})
     return out
@@ -103,7 +121,8 @@ def table_ii(rows: list[dict]) -> dict:
     t: dict[str, dict[str, int]] = {}
     for r in rows:
         for o in r["outcomes"]:
-            d = t.setdefault(o["label"], {"found": 0, "wrong": 0, "absent": 0, "missed": 0})
+            d = t.setdefault(o["label"], {"found": 0, "twin": 0, "wrong": 0, "absent": 0,
+                                          "missed": 0})
             d[o["outcome"]] += 1
     return t
 
@@ -138,17 +157,20 @@ def main(argv=None) -> int:
     ap.add_argument("--preset", default="hall")
     ap.add_argument("--runs", type=int, default=4)
     ap.add_argument("--seconds", type=float, default=None, help="run length (preset default)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override, e.g. fusion.align_to_map=false (repeatable)")
+    ap.add_argument("--tag", default="", help="suffix of the output files")
     args = ap.parse_args(argv or [])
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            row = one_seed(seed, args.preset, args.runs, Path(tmp), args.seconds)
+            row = one_seed(seed, args.preset, args.runs, Path(tmp), args.seconds, args.set)
             rows.append(row)
             print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
                            for k, v in row.items() if k != "outcomes"), flush=True)
     a = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0] if k != "outcomes"}
     total = {
-        "preset": args.preset, "seeds": len(rows),
+        "preset": args.preset, "seeds": len(rows), "overrides": args.set,
         "gatmo_over_static_ate_median": float(np.median(a["gatmo_ate_m"] / a["static_ate_m"])),
         "gatmo_over_before_ate_median": float(np.median(a["gatmo_ate_m"] / a["before_ate_m"])),
         "seeds_gatmo_not_worse": int(np.sum(a["gatmo_ate_m"] <= a["static_ate_m"] * 1.05)),
@@ -163,9 +185,9 @@ def main(argv=None) -> int:
     table = table_ii(rows)
     total["table_ii"] = table
     print(json.dumps(total, indent=1))
-    fig_5(rows, OUT / f"fig5_{args.preset}.png")
+    fig_5(rows, OUT / f"fig5_{args.preset}{args.tag}.png")
     OUT.mkdir(exist_ok=True)
-    (OUT / f"gatmo_sim_{args.preset}.json").write_text(json.dumps({"rows": rows,
+    (OUT / f"gatmo_sim_{args.preset}{args.tag}.json").write_text(json.dumps({"rows": rows,
                                                                    "total": total}, indent=1))
     return 0
 

@@ -55,6 +55,8 @@ class GatmoConfig(GatmoModel):
     gate_m: float = Field(1.0, gt=0)
     track_max_range_m: float = Field(5.0, gt=0,
                                      description="farther returns are too sparse to track")
+    track_range_margin_m: float = Field(
+        0.7, ge=0, description="returns within this of the laser's max range are not tracked")
     # person hypothesis (constant-velocity Kalman filter on the centre)
     person_accel_std: float = Field(1.5, gt=0)
     person_meas_std_m: float = Field(0.1, gt=0)

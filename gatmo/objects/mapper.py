@@ -92,6 +92,7 @@ class GatmoMapper:
         self._next_meta = 1
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._unexplained = np.zeros(self._grid.cells.shape, dtype=np.int32)
+        self._unexplained_dilated: np.ndarray | None = None
         # returns this run not explained by walls or other structure (on or near an object, or
         # near nothing): what the absence veto looks at
         self._near_returns = np.zeros(self._grid.cells.shape, dtype=np.int32)
@@ -117,6 +118,10 @@ class GatmoMapper:
         self._rays: dict[int, int] = {}
         self._through: dict[int, int] = {}  # beams passing well beyond the object
         self._hits: dict[int, int] = {}  # beams ending on it
+        # beyond Alg. 1: the object's cells the map expects beams to end on (its surface as
+        # seen this run), and those of them beams passed well beyond (not later hit)
+        self._front: dict[int, set] = {}
+        self._front_through: dict[int, set] = {}
         self._doubt: set[int] = set()
 
     # ------------------------------------------------------------------ maps
@@ -194,6 +199,7 @@ class GatmoMapper:
         self._meta = []
         self._free[:] = 0
         self._unexplained[:] = 0
+        self._unexplained_dilated = None
         self._near_returns[:] = 0
         self._reset_run_evidence()
 
@@ -264,13 +270,36 @@ class GatmoMapper:
         cu = self._grid.world_to_cell(un)
         ok = self._grid.in_bounds(cu)
         np.add.at(self._unexplained, (cu[ok, 1], cu[ok, 0]), 1)
+        self._unexplained_dilated = None
         # beyond the paper: a long-range laser's far returns are a beam every 0.2-0.3 m; a
-        # person 15 m away makes a 'chair' that matches any small absent object
-        self._track(un[np.hypot(*(un - lp[:2]).T) <= self.cfg.track_max_range_m], stamp_s,
-                    events)
+        # person 15 m away makes a 'chair' that matches any small absent object. And only
+        # returns well inside the laser's range are tracked: an object cut by the range limit
+        # looks like a smaller one (a desk's near end, a footstool), and with a band of
+        # untracked returns beyond, the rest of it shows in the ring test (_part_of_larger)
+        reach = min(self.cfg.track_max_range_m,
+                    scan.range_max_m - self.cfg.track_range_margin_m)
+        self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events)
         self._expire(stamp_s, events)
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
+
+    def unexplained_at(self, points_xy: np.ndarray, min_count: int = 2) -> np.ndarray:
+        """(N,) bool: map-frame points (N, 2) that land where this run's returns were not
+        explained by the current map (at least ``min_count`` of them, in the point's cell or a
+        neighbour) and that no map cell is within delta_W of: furniture the map does not have
+        yet, and people. Beyond the paper: the stack withholds such returns from the localizer
+        (they pull a likelihood field towards wherever they happen to fall near old
+        furniture)."""
+        g = self._grid
+        if self._unexplained_dilated is None:
+            self._unexplained_dilated = ndimage.maximum_filter(self._unexplained, size=3)
+        c = g.world_to_cell(np.asarray(points_xy, dtype=float).reshape(-1, 2))
+        ok = g.in_bounds(c)
+        out = np.zeros(len(c), dtype=bool)
+        cy, cx = c[ok, 1], c[ok, 0]
+        out[ok] = (self._unexplained_dilated[cy, cx] >= min_count) & \
+            (self._near_dist[cy, cx] > self.cfg.delta_W_m)
+        return out
 
     def _count_near_returns(self, pts: np.ndarray, lp: np.ndarray) -> None:
         g = self._grid
@@ -356,7 +385,13 @@ class GatmoMapper:
                 self._doubt.add(oid)
             core = self._core(o)
             frac = len(self._seen.get(oid, set()) & core) / max(len(core), 1)
-            if (frac > c.beta_thresh and self._rays.get(oid, 0) >= c.absence_min_rays
+            # beyond Alg. 1: a short-range laser reaches only the near side of an object
+            # (its rays end inside it at max range), so its core is never crossed; the
+            # surface the beams should have ended on, seen through, is the same evidence
+            front = self._front.get(oid, set())
+            frac_front = len(self._front_through.get(oid, set())) / max(len(front), 1)
+            if (max(frac, frac_front) > c.beta_thresh
+                    and self._rays.get(oid, 0) >= c.absence_min_rays
                     and through >= c.absence_min_beams
                     and through >= c.absence_through_fraction * (through + hits)):
                 if not self._distinctive(o) and self._something_there(o):
@@ -391,14 +426,16 @@ class GatmoMapper:
         # beyond absence_max_range_m a heading error of a degree moves a beam by more than a
         # small object's width: such beams are no evidence for or against an object
         own_near = np.where(expected <= c.absence_max_range_m, own, -1)
-        return own, ok, through, on, own_near
+        loc = np.full(len(r), -1)
+        loc[ok] = self._local[cells[ok, 1], cells[ok, 0]]
+        return own, ok, through, on, own_near, loc
 
     def _beam_evidence(self, beams) -> set[int]:
         """Beyond Alg. 1, robust to pose errors of a cell or two: the beams the current map says
         should end on an object either pass well beyond it (evidence it is gone) or end on it
         (evidence it is there); beams ending short of it (occluded) say nothing. Adds to the
         run's counts per object id; returns the ids touched by this scan."""
-        _, _, through, on, own = beams
+        _, _, through, on, own, loc = beams
         objs = self.object_map.objects
         touched = set()
         for i in np.unique(own[own >= 0]):
@@ -407,10 +444,15 @@ class GatmoMapper:
             touched.add(oid)
             self._through[oid] = self._through.get(oid, 0) + int(np.sum(through[m]))
             self._hits[oid] = self._hits.get(oid, 0) + int(np.sum(on[m]))
+            ft = self._front_through.setdefault(oid, set())
+            ft.update(loc[m & through].tolist())
+            ft.difference_update(loc[m & on].tolist())
+            self._front.setdefault(oid, set()).update(loc[m & (through | on)].tolist())
         return touched
 
     def _clear_evidence(self, oid: int) -> None:
-        for d in (self._seen, self._rays, self._through, self._hits):
+        for d in (self._seen, self._rays, self._through, self._hits, self._front,
+                  self._front_through):
             d.pop(oid, None)
         self._doubt.discard(oid)
 

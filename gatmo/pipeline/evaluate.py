@@ -154,3 +154,21 @@ def expected_pose(o, piece_id: int, layout0: list[dict], layout: list[dict]):
     if p0 is None or pk is None or o.base_pose_xytheta is None:
         return None
     return compose(pk, compose(inverse(p0), o.base_pose_xytheta))
+
+
+def twin_of(o, piece_id: int, layout0: list[dict], layout: list[dict]) -> int | None:
+    """The id of another piece with the same label whose true pose in ``layout`` the object
+    (tied to ``piece_id``) now occupies, or None: identical pieces that swapped places look the
+    same to a laser, so the map is right while the identity is not."""
+    p0 = true_pose_of(piece_id, layout0)
+    label = next((p["label"] for p in layout0 if p["id"] == piece_id), None)
+    if p0 is None or o.base_pose_xytheta is None:
+        return None
+    rel = compose(inverse(p0), o.base_pose_xytheta)
+    for p in layout:
+        if p["id"] == piece_id or p["label"] != label:
+            continue
+        md, cd = placement_error(o, compose(np.array(p["pose"], dtype=float), rel))
+        if md < 0.1 and cd < 0.15:
+            return int(p["id"])
+    return None

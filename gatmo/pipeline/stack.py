@@ -20,7 +20,7 @@ Only numpy and gatmo's algorithm types are used here; files are the business of
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -42,6 +42,19 @@ class FusionConfig(GatmoModel):
     jumps against odometry by more than ``max_offset_jump_m`` (recovery injected particles, a
     kidnapping), GATMO waits ``settle_after_jump_m`` of travel: a filter that has just locked
     onto a look-alike place is as confident as one that is right.
+
+    ``align_to_map``: GATMO's pose is the published one refined by ICP against the current map.
+    An alignment that converges with most points matched but moves the pose by more than
+    ``align_max_correction_*`` contradicts the filter: GATMO skips the scan. One that is
+    inconclusive (not converged, degenerate, or fewer than ``align_min_fitness`` of the points
+    matched) says nothing either way in a rearranged room, where the moved furniture is what
+    does not match: ``align_inconclusive: filter_pose`` hands GATMO the filter's pose (its own
+    beam-agreement tests still apply), ``skip`` skips the scan (GATMO then saw 20 of 600 scans
+    of a simulated rearranged hall).
+
+    ``mask_unexplained``: returns that land, seen from the pose odometry predicts, where GATMO
+    found this run's returns unexplained by the current map (furniture it has not placed yet,
+    people) are withheld from the localizer. Beyond the paper.
 
     ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
     estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
@@ -66,6 +79,8 @@ class FusionConfig(GatmoModel):
     align_min_fitness: float = 0.6
     align_max_correction_m: float = 0.15
     align_max_correction_deg: float = 5.0
+    align_inconclusive: Literal["filter_pose", "skip"] = "filter_pose"
+    mask_unexplained: bool = True
 
 
 @dataclass
@@ -99,20 +114,23 @@ class MapAligner:
             self._normals, _ = normals_of(self._pts, self._tree)
 
     def refine(self, pose_xytheta: np.ndarray, scan: Scan) -> tuple[np.ndarray, bool]:
-        """(refined base pose, trustworthy) for a scan near ``pose_xytheta``."""
+        """(refined base pose, trustworthy) for a scan near ``pose_xytheta``; an inconclusive
+        alignment gives the pose back, trusted only with ``align_inconclusive: filter_pose``."""
         from gatmo.scanmatch.icp import icp_2d, voxel_downsample
 
+        f = self.fusion
+        inconclusive = (pose_xytheta, f.align_inconclusive == "filter_pose")
         if self._tree is None:
-            return pose_xytheta, False
+            return inconclusive
         pts = voxel_downsample(scan.points_base_xy(), 0.05)
         if len(pts) < 20:
-            return pose_xytheta, False
-        f = self.fusion
+            return inconclusive
         res = icp_2d(pts, self._pts, pose_xytheta, target_tree=self._tree,
                      target_normals=self._normals, max_corr_dist_m=0.3, max_iter=15)
+        if not res.converged or res.degenerate or res.fitness < f.align_min_fitness:
+            return inconclusive
         corr = relative(pose_xytheta, res.T_target_source)
-        ok = (res.converged and not res.degenerate and res.fitness >= f.align_min_fitness
-              and np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
+        ok = (np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
               and abs(corr[2]) <= np.radians(f.align_max_correction_deg))
         return (res.T_target_source if ok else pose_xytheta), bool(ok)
 
@@ -172,6 +190,7 @@ class LocalizationStack:
         self.resets: list[tuple[float, str, np.ndarray]] = []  # (stamp_s, why, pose)
         self.n_scans = 0
         self.n_map_updates = 0
+        self.n_masked = 0  # returns withheld from the localizer (mask_unexplained)
         self._aligner: MapAligner | None = None
         self._last_loc: np.ndarray | None = None
         self._last_odom: np.ndarray | None = None
@@ -190,7 +209,7 @@ class LocalizationStack:
     def step(self, scan: Scan) -> StackStep:
         """Process one scan; see the module docstring for the order of work."""
         t0 = time.perf_counter()
-        est = self.localizer.update(scan.odom_pose_xytheta, scan)
+        est = self.localizer.update(scan.odom_pose_xytheta, self._masked(scan))
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)
         confident = is_confident(est, self.fusion)
         odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
@@ -278,6 +297,29 @@ class LocalizationStack:
             map_changed=changed,
             ms=(time.perf_counter() - t0) * 1e3,
         )
+
+    def _masked(self, scan: Scan) -> Scan:
+        """The scan with the returns GATMO cannot explain set to NaN (``mask_unexplained``),
+        placed from the last localizer pose moved by odometry."""
+        unexplained_at = getattr(self.mapper, "unexplained_at", None)
+        if unexplained_at is None or not self.fusion.mask_unexplained or self._last_loc is None:
+            return scan
+        odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
+        pred = compose(self._last_loc, relative(self._last_odom, odom))
+        lp = compose(pred, scan.laser_pose_xytheta)
+        valid = scan.valid
+        if not valid.any():
+            return scan
+        a = lp[2] + scan.angles_rad[valid]
+        r = scan.ranges_m[valid]
+        pts = lp[:2] + r[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
+        bad = unexplained_at(pts)
+        self.n_masked += int(bad.sum())
+        if not bad.any():
+            return scan
+        ranges = scan.ranges_m.copy()
+        ranges[np.nonzero(valid)[0][bad]] = np.nan
+        return replace(scan, ranges_m=ranges)
 
     def end_run(self) -> list:
         """Close a log: GATMO adds dominant chairs in Gamma to the map (paper, Sec. V)."""

@@ -69,6 +69,48 @@ def test_shifted_small_object_is_in_doubt_not_absent_and_relocated_with_its_id()
     assert np.hypot(*(box.pose_xytheta[:2] - [5.075, 3.0])) < 0.06
 
 
+def test_object_seen_only_from_its_near_side_at_the_range_limit_becomes_absent():
+    # a 1.4 m deep desk whose near face is 3.4 m from a 4 m laser: rays end a third of the way
+    # into it, so Alg. 1's fraction of its core stays below beta_thresh, but the surface the
+    # map expects beams to end on is seen through: that is absence too
+    g = room_grid(12, 4.5, 0.05, boxes=[(5.4, 1.9, 6.8, 2.6)])
+    world = room_grid(12, 4.5, 0.05)  # the desk is gone
+    m = GatmoMapper.from_config(CFG, g)
+    m.begin_run(1)
+    desk = [o for o in m.object_map.objects if not o.structure][0]
+    events = []
+    for i, y in enumerate(np.linspace(1.8, 2.7, 12)):
+        s = make_scan(world, (2.0, y, 0.0), n_beams=181, max_range_m=4.0, stamp_s=0.2 * i)
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=0.2 * i)
+        if desk.status == "U":
+            core = m._core(desk)
+            assert len(m._seen.get(desk.id, set()) & core) <= CFG.beta_thresh * len(core)
+    assert [(e.kind, e.object_id) for e in events] == [("absent", desk.id)]
+
+
+@pytest.mark.parametrize("margin_m, relocated", [(0.7, False), (0.0, True)])
+def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, relocated):
+    # a 0.5 m box is gone; a 1.4 m desk stands across the laser's 4 m range limit, so only its
+    # near half is within reach. Tracked up to the range limit, that half looks like the box
+    # and the box is relocated onto it; with the desk's returns in the last 0.7 m of range
+    # untracked but counted, the ring test sees the rest of the desk and refuses
+    cfg = CFG.model_copy(update={"track_range_margin_m": margin_m})
+    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5)])
+    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
+    m = GatmoMapper.from_config(cfg, g)
+    m.begin_run(1)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]  # sees the box gone
+    path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)]  # drives past the desk's end
+    events = []
+    for i, pose in enumerate(path):
+        s = make_scan(world, pose, n_beams=361, max_range_m=4.0, stamp_s=0.1 * i)
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
+    kinds = [(e.kind, e.object_id) for e in events]
+    assert kinds[0] == ("absent", box.id)
+    assert (("relocated", box.id) in kinds) == relocated
+
+
 @pytest.mark.parametrize("track_max_range_m, expect", [(5.0, 0), (9.0, 1)])
 def test_far_returns_are_not_tracked(track_max_range_m, expect):
     # a new box 6.5 m away: its returns are sparse at that range and not tracked by default

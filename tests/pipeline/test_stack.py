@@ -219,3 +219,80 @@ def test_gatmo_waits_after_the_localizer_jumps():
     assert t[:20].all()
     assert not t[20:50].any()  # 3 m at 0.1 m per scan
     assert t[52:].all()
+
+
+def _aligner(grid, **kw):
+    from gatmo.pipeline.stack import MapAligner
+
+    a = MapAligner(FusionConfig(**kw))
+    a.set_grid(grid)
+    return a
+
+
+def test_inconclusive_alignment_hands_gatmo_the_filter_pose_or_skips():
+    """Most returns on furniture the map does not have (a rearranged room): the alignment
+    matches too few points to say anything; by default GATMO gets the filter's pose, with
+    ``align_inconclusive: skip`` the scan is skipped."""
+    boxes = [(2.6, y, 2.9, y + 0.3) for y in np.arange(0.4, 5.5, 0.45)]
+    boxes += [(x, 4.6, x + 0.3, 4.9) for x in np.arange(0.4, 2.4, 0.45)]
+    world = room_grid(10, 6, 0.05, boxes=boxes)
+    pose = np.array([1.5, 3.0, 0.0])
+    scan = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=4.0)
+    empty = room_grid(10, 6, 0.05)
+    got, trusted = _aligner(empty).refine(pose, scan)
+    assert trusted and np.array_equal(got, pose)
+    got, trusted = _aligner(empty, align_inconclusive="skip").refine(pose, scan)
+    assert not trusted and np.array_equal(got, pose)
+
+
+def test_alignment_that_moves_the_pose_far_contradicts_the_filter():
+    """The map explains the scan well from 0.3 m away from the filter's pose: the filter is off
+    and GATMO skips the scan whatever align_inconclusive says; near the truth it refines."""
+    grid = room_grid(6, 4, 0.05, boxes=[(2.0, 1.0, 2.5, 1.5), (4.0, 2.5, 4.3, 3.2)])
+    truth = np.array([3.0, 2.0, 0.1])
+    scan = make_scan(grid, truth, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0)
+    for mode in ("filter_pose", "skip"):
+        a = _aligner(grid, align_inconclusive=mode)
+        _, trusted = a.refine(truth + [0.3, 0.0, 0.0], scan)
+        assert not trusted
+        got, trusted = a.refine(truth + [0.04, -0.03, 0.01], scan)
+        assert trusted and np.hypot(*(got[:2] - truth[:2])) < 0.02
+
+
+class RecordingLocalizer(ScriptedLocalizer):
+    def __init__(self, truth):
+        super().__init__(truth, confident_at=range(len(truth)))
+        self.scans = []
+
+    def update(self, odom, scan):
+        self.scans.append(scan)
+        return super().update(odom, scan)
+
+
+def test_returns_gatmo_cannot_explain_are_withheld_from_the_localizer():
+    """A box the map does not have: once GATMO has seen its returns unexplained, the stack
+    hands the localizer scans with those returns masked (NaN); the walls' returns stay."""
+    from gatmo.objects import GatmoConfig, GatmoMapper
+
+    grid = room_grid(8, 5, 0.05)
+    world = room_grid(8, 5, 0.05, boxes=[(4.0, 2.2, 4.4, 2.6)])
+    truth = np.array([[1.5 + 0.02 * i, 2.4, 0.0] for i in range(12)])
+    scans = [make_scan(world, p, n_beams=181, max_range_m=6.0, odom_pose_xytheta=p,
+                       stamp_s=0.1 * i) for i, p in enumerate(truth)]
+    s = scans[-1]
+    ends = truth[-1, :2] + s.ranges_m[:, None] * np.stack([np.cos(s.angles_rad),
+                                                           np.sin(s.angles_rad)], axis=1)
+    on_box = (np.abs(ends[:, 0] - 4.2) < 0.25) & (np.abs(ends[:, 1] - 2.4) < 0.25)
+    assert on_box.sum() >= 8
+    for mask, expect in ((True, True), (False, False)):
+        loc = RecordingLocalizer(truth)
+        mapper = GatmoMapper.from_config(GatmoConfig(), grid)
+        stack = LocalizationStack(loc, None, mapper,
+                                  FusionConfig(align_to_map=False, mask_unexplained=mask))
+        stack.begin_run(1)
+        for s in scans:
+            stack.step(s)
+        last = loc.scans[-1].ranges_m
+        assert bool(np.isnan(last[on_box]).all()) == expect
+        assert not np.isnan(last[~on_box]).any()
+        assert (stack.n_masked > 0) == expect

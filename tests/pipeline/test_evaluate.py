@@ -1,0 +1,42 @@
+"""Scoring GATMO's object map against a scenario's truth (gatmo.pipeline.evaluate)."""
+
+import numpy as np
+
+from gatmo.objects.objectmap import MapObject
+from gatmo.pipeline.evaluate import expected_pose, placement_error, twin_of
+
+
+def _box_object(pose, label="box"):
+    xs = np.arange(-0.225, 0.226, 0.05)
+    gx, gy = np.meshgrid(xs, xs)
+    shape = np.stack([gx.ravel(), gy.ravel()], 1)
+    return MapObject(1, label, "M", np.array(pose, float), shape, shape,
+                     base_pose_xytheta=np.array([2.0, 1.0, 0.0]))
+
+
+def _piece(pid, pose, label="box"):
+    return {"id": pid, "label": label, "pose": list(pose),
+            "shape": {"kind": "box", "dims_m": [0.5, 0.5]}}
+
+
+def test_expected_pose_follows_the_piece_and_placement_error_is_zero_there():
+    o = _box_object([5.0, 3.0, 0.3])
+    layout0 = [_piece(7, [2.0, 1.0, 0.0])]
+    layout = [_piece(7, [5.0, 3.0, 0.3])]
+    exp = expected_pose(o, 7, layout0, layout)
+    np.testing.assert_allclose(exp, [5.0, 3.0, 0.3], atol=1e-9)
+    md, cd = placement_error(o, exp)
+    assert md < 1e-9 and cd < 1e-9
+    md, cd = placement_error(o, exp + np.array([0.3, 0.0, 0.0]))
+    assert cd > 0.29
+
+
+def test_twin_of_names_the_identical_piece_the_object_now_sits_on():
+    layout0 = [_piece(7, [2.0, 1.0, 0.0]), _piece(8, [6.0, 1.0, 0.0]),
+               _piece(9, [9.0, 1.0, 0.0], label="footstool")]
+    layout = [_piece(7, [2.0, 4.0, 0.0]), _piece(8, [5.0, 3.0, 0.0]),
+              _piece(9, [9.0, 4.0, 0.0], label="footstool")]
+    assert twin_of(_box_object([5.0, 3.0, 0.0]), 7, layout0, layout) == 8
+    assert twin_of(_box_object([2.0, 4.0, 0.0]), 7, layout0, layout) is None  # its own place
+    assert twin_of(_box_object([9.0, 4.0, 0.0]), 7, layout0, layout) is None  # other label
+    assert twin_of(_box_object([7.0, 7.0, 0.0]), 7, layout0, layout) is None  # nowhere
