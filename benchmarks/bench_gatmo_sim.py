@@ -23,15 +23,10 @@ OUT = Path("bench-out")
 
 def stack_config(overrides: list[str] | None = None):
     """The demo's stack config with ``key=value`` overrides (dotted keys, YAML values)."""
-    import yaml
-
-    from gatmo.batch.spec import apply_overrides
+    from benchmarks._overrides import with_overrides
     from gatmo.pipeline.config import sim_stack_config
 
-    cfg = sim_stack_config()
-    pairs = [(kv.split("=", 1)[0], yaml.safe_load(kv.split("=", 1)[1])) for kv in overrides or []]
-    apply_overrides(cfg, pairs)
-    return cfg
+    return with_overrides(sim_stack_config(), overrides)
 
 
 def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None = None,
@@ -69,6 +64,9 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
         "moved": sum(x.get("obj_moved", 0) for x in g),
         "found": sum(x.get("obj_found", 0) for x in g),
         "absent_events": sum(x.get("absent", 0) for x in g),
+        "gone": sum(x.get("obj_gone", 0) for x in g),
+        "gone_noticed": sum(round(x.get("obj_gone", 0) * x.get("obj_absent_recall", 0.0))
+                            for x in g if x.get("obj_gone", 0)),
         "false_relocations": sum(x.get("obj_false_relocations", 0) for x in g),
         "false_absences": sum(x.get("obj_false_absences", 0) for x in g),
         "map_correct_last": g[-1].get("obj_map_correct_fraction", float("nan")),
@@ -151,15 +149,15 @@ def fig_5(rows: list[dict], path: Path) -> None:
 
 
 def main(argv=None) -> int:
+    from benchmarks._overrides import add_override_args
+
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--preset", default="hall")
     ap.add_argument("--runs", type=int, default=4)
     ap.add_argument("--seconds", type=float, default=None, help="run length (preset default)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="config override, e.g. fusion.align_to_map=false (repeatable)")
-    ap.add_argument("--tag", default="", help="suffix of the output files")
+    add_override_args(ap)
     args = ap.parse_args(argv or [])
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -177,6 +175,7 @@ def main(argv=None) -> int:
         "static_lost_mean": float(a["static_lost"].mean()),
         "gatmo_lost_mean": float(a["gatmo_lost"].mean()),
         "found_over_moved": float(a["found"].sum() / max(a["moved"].sum(), 1)),
+        "absent_recall": float(a["gone_noticed"].sum() / max(a["gone"].sum(), 1)),
         "false_relocations_per_run": float(a["false_relocations"].sum() / (len(rows) * args.runs)),
         "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * args.runs)),
         "gatmo_ms_per_scan": float(a["gatmo_ms_per_scan"].mean()),

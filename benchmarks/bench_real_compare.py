@@ -3,7 +3,7 @@ localizer vs the full stack, both with the same configuration and seed. People w
 and clutter comes and goes: GATMO must not make localization worse.
 
     python -m benchmarks.bench_real_compare [--logs intel,aces,mit-csail] [--max-scans N]
-                                            [--demo-config]
+                                            [--demo-config] [--set KEY=VALUE ...] [--tag NAME]
 
 Maps and reference poses:
 
@@ -76,12 +76,15 @@ def _prepare(name: str, out: Path):
 
 
 def main(argv=None) -> int:
+    from benchmarks._overrides import add_override_args, with_overrides
+
     ap = argparse.ArgumentParser()
     ap.add_argument("--logs", default="intel,aces,mit-csail")
     ap.add_argument("--max-scans", type=int, default=None)
     ap.add_argument("--demo-config", action="store_true",
                     help="the demo's likelihood_field_prob (sigma_hit 0.1 m) instead; results "
                     "under <log>-demo")
+    add_override_args(ap)
     args = ap.parse_args(argv or [])
     if not (DATA / "slam-benchmark").exists():
         print(f"skipped: {DATA} not found (the Kümmerle benchmark logs are needed)")
@@ -96,14 +99,13 @@ def main(argv=None) -> int:
         out = OUT / name
         out.mkdir(parents=True, exist_ok=True)
         map_yaml, gt, pose0 = _prepare(name, out)
-        cfg = real_log_config(demo_model=args.demo_config)
-        if args.demo_config:
-            out = OUT / f"{name}-demo"
+        cfg = with_overrides(real_log_config(demo_model=args.demo_config), args.set)
+        key = (f"{name}-demo" if args.demo_config else name) + args.tag
+        out = OUT / key
         res = compare(map_yaml, [DATA / "slam-benchmark" / f"{name}.sort.bag"], out / "cmp",
                       initial_pose=pose0, gt_paths=[gt],
                       relations_path=DATA / "slam-benchmark" / f"{name}.relations",
                       max_scans=args.max_scans, pictures=True, config=cfg)
-        key = f"{name}-demo" if args.demo_config else name
         figures[key] = {r["side"]: {k: r.get(k) for k in KEYS} for r in res.rows
                          if r.get("log") != "all"}
         for side, r in figures[key].items():

@@ -1,6 +1,8 @@
 """Soak (issue 7): many consecutive simulated runs with the object map carried over, the
 furniture rearranged every time. Per run: objects placed in the map vs pieces in the world,
-peak RSS, ms per scan, localization error. What must stay flat stays flat, or it shows here.
+peak RSS, ms per scan, localization error, and the relocations (moved pieces found with their
+id at the true pose, false relocations, the fraction of the map's pieces placed right). What
+must stay flat stays flat, or it shows here.
 
     python -m benchmarks.bench_soak [--runs 50] [--seconds 30]
 """
@@ -25,6 +27,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None) -> 
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
+    from gatmo.pipeline.evaluate import score_run, tie_objects
     from gatmo.pipeline.runs import make_localizer, make_matcher
     from gatmo.pipeline.stack import LocalizationStack
 
@@ -36,6 +39,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None) -> 
     cfg = sim_stack_config()
     base = load_map(scen.map_yaml)
     mapper = GatmoMapper.from_config(cfg.gatmo, base)
+    ties = tie_objects(mapper.object_map, doc)
     rows = []
     for k, log in enumerate(scen.logs):
         scans = list(CarmenLog(log))
@@ -45,10 +49,13 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None) -> 
         stack.begin_run(k + 1)
         t0 = time.perf_counter()
         err = []
+        events = []
         for s in scans:
             st = stack.step(s)
             err.append(np.hypot(*(st.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
-        stack.end_run()
+            events += [e.as_dict() for e in st.events]
+        events += [e.as_dict() for e in stack.end_run()]
+        score = score_run(mapper.object_map, ties, doc, k + 1, events)
         ms = (time.perf_counter() - t0) * 1e3 / len(scans)
         om = mapper.object_map
         rows.append({
@@ -60,6 +67,9 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None) -> 
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "ms_per_scan": ms,
             "median_err_m": float(np.median(err)),
+            "moved": score["moved"], "found": score["found"],
+            "false_relocations": score["false_relocations"],
+            "map_correct_fraction": score["map_correct_fraction"],
         })
     return rows
 
