@@ -69,15 +69,30 @@ def test_shifted_small_object_is_in_doubt_not_absent_and_relocated_with_its_id()
     assert np.hypot(*(box.pose_xytheta[:2] - [5.075, 3.0])) < 0.06
 
 
+def _one_object(size_m, map_box, world_boxes, **cfg_update):
+    """(mapper in run 1, its one object, the world) for a room of ``size_m`` (w, h) whose map
+    has ``map_box`` and whose world has ``world_boxes`` instead."""
+    cfg = CFG.model_copy(update=cfg_update)
+    m = GatmoMapper.from_config(cfg, room_grid(*size_m, 0.05, boxes=[map_box]))
+    m.begin_run(1)
+    obj = [o for o in m.object_map.objects if not o.structure][0]
+    return m, obj, room_grid(*size_m, 0.05, boxes=world_boxes)
+
+
+def _drive(m, world, path, *, max_range_m, n_beams=361, dt_s=0.1):
+    """Scans of ``world`` along ``path`` (poses), laid on mapper ``m`` with true poses."""
+    events = []
+    for i, pose in enumerate(path):
+        s = make_scan(world, pose, n_beams=n_beams, max_range_m=max_range_m, stamp_s=dt_s * i)
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=dt_s * i)
+    return events
+
+
 def test_object_seen_only_from_its_near_side_at_the_range_limit_becomes_absent():
     # a 1.4 m deep desk whose near face is 3.4 m from a 4 m laser: rays end a third of the way
     # into it, so Alg. 1's fraction of its core stays below beta_thresh, but the surface the
     # map expects beams to end on is seen through: that is absence too
-    g = room_grid(12, 4.5, 0.05, boxes=[(5.4, 1.9, 6.8, 2.6)])
-    world = room_grid(12, 4.5, 0.05)  # the desk is gone
-    m = GatmoMapper.from_config(CFG, g)
-    m.begin_run(1)
-    desk = [o for o in m.object_map.objects if not o.structure][0]
+    m, desk, world = _one_object((12, 4.5), (5.4, 1.9, 6.8, 2.6), [])  # the desk is gone
     events = []
     for i, y in enumerate(np.linspace(1.8, 2.7, 12)):
         s = make_scan(world, (2.0, y, 0.0), n_beams=181, max_range_m=4.0, stamp_s=0.2 * i)
@@ -94,19 +109,11 @@ def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, re
     # near half is within reach. Tracked up to the range limit, that half looks like the box
     # and the box is relocated onto it; with the desk's returns in the last 0.7 m of range
     # untracked but counted, the ring test sees the rest of the desk and refuses
-    cfg = CFG.model_copy(update={"track_range_margin_m": margin_m})
-    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5)])
-    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
-    m = GatmoMapper.from_config(cfg, g)
-    m.begin_run(1)
-    box = [o for o in m.object_map.objects if not o.structure][0]
+    m, box, world = _one_object((12, 8), (3.0, 1.0, 3.5, 1.5), [(4.8, 4.2, 5.3, 5.6)],
+                                track_range_margin_m=margin_m)
     path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]  # sees the box gone
     path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)]  # drives past the desk's end
-    events = []
-    for i, pose in enumerate(path):
-        s = make_scan(world, pose, n_beams=361, max_range_m=4.0, stamp_s=0.1 * i)
-        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
-    kinds = [(e.kind, e.object_id) for e in events]
+    kinds = [(e.kind, e.object_id) for e in _drive(m, world, path, max_range_m=4.0)]
     assert kinds[0] == ("absent", box.id)
     assert (("relocated", box.id) in kinds) == relocated
 
@@ -130,19 +137,11 @@ def test_a_speck_is_not_relocated_far_away(small_object_area_m2, relocated):
     # a 15 cm speck of clutter vanishes and an identical one appears 3.4 m away: by default
     # that is not taken for the same object (anything small matches it), it is absent and the
     # new one is tracked as unknown (Gamma)
-    cfg = CFG.model_copy(update={"small_object_area_m2": small_object_area_m2})
-    g = room_grid(10, 6, 0.05, boxes=[(6.0, 2.0, 6.15, 2.15)])
-    world = room_grid(10, 6, 0.05, boxes=[(3.0, 4.0, 3.15, 4.15)])
-    m = GatmoMapper.from_config(cfg, g)
-    m.begin_run(1)
-    speck = [o for o in m.object_map.objects if not o.structure][0]
+    m, speck, world = _one_object((10, 6), (6.0, 2.0, 6.15, 2.15), [(3.0, 4.0, 3.15, 4.15)],
+                                  small_object_area_m2=small_object_area_m2)
     path = [(x, 3.0, 0.0) for x in np.linspace(1.5, 4.5, 40)]
     path += [(4.5, 3.0, th) for th in np.linspace(0, 3.0, 20)]
-    events = []
-    for i, pose in enumerate(path):
-        s = make_scan(world, pose, n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
-        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
-    events += m.end_run()
+    events = _drive(m, world, path, max_range_m=6.0) + m.end_run()
     kinds = [(e.kind, e.object_id) for e in events]
     assert kinds[0] == ("absent", speck.id)
     assert (("relocated", speck.id) in kinds) == relocated
