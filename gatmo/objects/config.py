@@ -78,5 +78,7 @@ class GatmoConfig(GatmoModel):
         "within doubt_search_m, absent only with no returns around them")
     lookalike_tolerance: float = Field(0.15, gt=0)
     add_min_cells: int = Field(10, ge=1)
+    gamma_min_verified_scans: int = Field(
+        1, ge=0, description="scans from independently confirmed poses a new object needs")
     add_min_free_fraction: float = Field(
         0.5, ge=0, le=1, description="of a new object's cells, free in the static map")

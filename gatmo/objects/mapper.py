@@ -100,8 +100,10 @@ class GatmoMapper:
         self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
-                       "skipped_disagreement": 0, "absence_vetoed": 0}
+                       "skipped_disagreement": 0, "absence_vetoed": 0,
+                       "gamma_unverified": 0}
         self._ms: list[float] = []
+        self._verified_now = True
         self._beams = None
         self._reset_run_evidence()
         self._build_owner()
@@ -235,8 +237,10 @@ class GatmoMapper:
 
     # ---------------------------------------------------------------- update
     def update(self, pose_xytheta, scan: Scan, *, pose_confident: bool,
-               stamp_s: float) -> list[Event]:
-        """One scan from the base pose (map frame). Returns what changed."""
+               stamp_s: float, pose_verified: bool = True) -> list[Event]:
+        """One scan from the base pose (map frame). Returns what changed. ``pose_verified``:
+        the pose was confirmed by an independent check (scan-to-map alignment), not only by
+        the filter's covariance; new objects need some scans from such poses."""
         t0 = time.perf_counter()
         self._last_stamp = float(stamp_s)
         events: list[Event] = []
@@ -278,6 +282,7 @@ class GatmoMapper:
         # untracked returns beyond, the rest of it shows in the ring test (_part_of_larger)
         reach = min(self.cfg.track_max_range_m,
                     scan.range_max_m - self.cfg.track_range_margin_m)
+        self._verified_now = bool(pose_verified)
         self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events)
         self._expire(stamp_s, events)
         self._ms.append((time.perf_counter() - t0) * 1e3)
@@ -506,9 +511,11 @@ class GatmoMapper:
         for mid, zs in assigned.items():
             m = by_id[mid]
             m.update(np.vstack(zs), stamp_s)
+            m.n_verified += int(self._verified_now)
             touched.append(m)
         for z in fresh:
             m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m)
+            m.n_verified = int(self._verified_now)
             self._next_meta += 1
             self._meta.append(m)
         self._merge_metaobjects()
@@ -744,6 +751,11 @@ class GatmoMapper:
     def _to_gamma(self, m: Metaobject, stamp_s, events) -> None:
         pts = m.chair_points()
         if len(pts) < self.cfg.chair_min_cells:
+            return
+        if m.n_verified < self.cfg.gamma_min_verified_scans:
+            # beyond the paper: seen only from poses the filter was sure of but nothing else
+            # confirmed; a confidently wrong filter makes furniture out of walls
+            self.counts["gamma_unverified"] += 1
             return
         # a part of an object the map already has where it stands (seen before it was placed
         # there) is no new object

@@ -36,6 +36,7 @@ class Metaobject:
         self.ll_chair = 0.0
         self.centres: list[np.ndarray] = []
         self.matched_object: int | None = None
+        self.n_verified = 0  # observations from independently confirmed poses (set by the mapper)
         self._add(points, stamp_s)
 
     # -------------------------------------------------------------- hypotheses
@@ -161,6 +162,7 @@ class Metaobject:
         for k, v in other.evidence.items():
             self.evidence[k] = self.evidence.get(k, 0) + v
         self.n_obs = max(self.n_obs, other.n_obs)
+        self.n_verified += other.n_verified
         self.first_seen = min(self.first_seen, other.first_seen)
         self.last_seen = max(self.last_seen, other.last_seen)
         self.ll_chair = max(self.ll_chair, other.ll_chair)

@@ -50,7 +50,9 @@ class FusionConfig(GatmoModel):
     matched) says nothing either way in a rearranged room, where the moved furniture is what
     does not match: ``align_inconclusive: filter_pose`` hands GATMO the filter's pose (its own
     beam-agreement tests still apply), ``skip`` skips the scan (GATMO then saw 20 of 600 scans
-    of a simulated rearranged hall).
+    of a simulated rearranged hall). GATMO is told which poses the alignment confirmed
+    (``pose_verified``): new objects need scans from such poses
+    (``gatmo.gamma_min_verified_scans``).
 
     ``mask_unexplained``: returns that land, seen from the pose odometry predicts, where GATMO
     found this run's returns unexplained by the current map (furniture it has not placed yet,
@@ -98,6 +100,7 @@ class MapAligner:
         self._tree = None
         self._pts = None
         self._normals = None
+        self.last_verified = False  # the last refine() confirmed the pose (not inconclusive)
 
     def set_grid(self, grid: OccupancyGrid) -> None:
         from scipy import ndimage
@@ -120,6 +123,7 @@ class MapAligner:
 
         f = self.fusion
         inconclusive = (pose_xytheta, f.align_inconclusive == "filter_pose")
+        self.last_verified = False
         if self._tree is None:
             return inconclusive
         pts = voxel_downsample(scan.points_base_xy(), 0.05)
@@ -132,6 +136,7 @@ class MapAligner:
         corr = relative(pose_xytheta, res.T_target_source)
         ok = (np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
               and abs(corr[2]) <= np.radians(f.align_max_correction_deg))
+        self.last_verified = bool(ok)
         return (res.T_target_source if ok else pose_xytheta), bool(ok)
 
 
@@ -271,13 +276,15 @@ class LocalizationStack:
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
             pose_ok = pose_ok and self._settle_left_m <= 0.0
             map_pose = pose
+            verified = pose_ok
             if pose_ok and self.fusion.align_to_map:
                 if self._aligner is None:
                     self._aligner = MapAligner(self.fusion)
                     self._aligner.set_grid(self.mapper.grid())
                 map_pose, pose_ok = self._aligner.refine(pose, scan)
+                verified = self._aligner.last_verified
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
-                                        stamp_s=scan.stamp_s)
+                                        stamp_s=scan.stamp_s, pose_verified=verified)
             for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
                 self.localizer.update_map_region(cells_new, ix0, iy0)
                 changed = True

@@ -118,6 +118,24 @@ def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, re
     assert (("relocated", box.id) in kinds) == relocated
 
 
+@pytest.mark.parametrize("verified, added", [(False, False), (True, True)])
+def test_new_objects_need_scans_from_confirmed_poses(verified, added):
+    # a box the map lacks, tracked as a chair all run: added at the end of the run only if
+    # some of its scans came from poses an independent check confirmed (a confidently wrong
+    # filter makes furniture out of walls)
+    m = GatmoMapper.from_config(CFG, room_grid(10, 6, 0.05))
+    m.begin_run(1)
+    world = room_grid(10, 6, 0.05, boxes=[(4.0, 2.3, 4.5, 3.2)])
+    events = []
+    for i, y in enumerate(np.linspace(2.4, 3.1, 20)):
+        s = make_scan(world, (2.0, y, 0.0), n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=0.1 * i,
+                           pose_verified=verified and i == 10)
+    events += m.end_run()
+    assert ("added" in [e.kind for e in events]) == added
+    assert (m.counts["gamma_unverified"] > 0) != added
+
+
 @pytest.mark.parametrize("track_max_range_m, expect", [(5.0, 0), (9.0, 1)])
 def test_far_returns_are_not_tracked(track_max_range_m, expect):
     # a new box 6.5 m away: its returns are sparse at that range and not tracked by default

@@ -101,7 +101,7 @@ def test_default_publishes_the_localizer_pose_and_gives_gatmo_the_fused_one():
         def begin_run(self, run_id):
             pass
 
-        def update(self, pose, scan, *, pose_confident, stamp_s):
+        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True):
             self.poses.append(np.asarray(pose, dtype=float))
             return []
 
@@ -181,21 +181,24 @@ def test_offset_not_confirmed_for_a_while_falls_back_to_the_localizer():
 class RecordingMapper:
     """Records whether the stack trusted each pose enough for GATMO."""
 
-    def __init__(self):
+    def __init__(self, grid=None):
         self.trusted = []
+        self.verified = []
+        self._grid = grid if grid is not None else room_grid(12, 6, 0.05)
 
     def begin_run(self, run_id):
         pass
 
-    def update(self, pose, scan, *, pose_confident, stamp_s):
+    def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True):
         self.trusted.append(pose_confident)
+        self.verified.append(pose_verified)
         return []
 
     def pop_map_changes(self):
         return []
 
     def grid(self):
-        return room_grid(12, 6, 0.05)
+        return self._grid
 
 
 def test_gatmo_waits_after_the_localizer_jumps():
@@ -296,3 +299,23 @@ def test_returns_gatmo_cannot_explain_are_withheld_from_the_localizer():
         assert bool(np.isnan(last[on_box]).all()) == expect
         assert not np.isnan(last[~on_box]).any()
         assert (stack.n_masked > 0) == expect
+
+
+def test_gatmo_is_told_which_poses_the_alignment_confirmed():
+    """In a room full of furniture the map lacks, the alignment is inconclusive: GATMO gets the
+    filter's pose (trusted) but not as verified; in the room as mapped, verified."""
+    boxes = [(2.6, y, 2.9, y + 0.3) for y in np.arange(0.4, 5.5, 0.45)]
+    boxes += [(x, 4.6, x + 0.3, 4.9) for x in np.arange(0.4, 2.4, 0.45)]
+    full = room_grid(10, 6, 0.05, boxes=boxes)
+    truth = np.array([[1.5 + 0.01 * i, 3.0, 0.0] for i in range(5)])
+    for grid, verified in ((room_grid(10, 6, 0.05), False), (full, True)):
+        scans = [make_scan(full, p, n_beams=361, fov_rad=2 * np.pi, max_range_m=4.0,
+                           odom_pose_xytheta=p, stamp_s=0.1 * i) for i, p in enumerate(truth)]
+        mapper = RecordingMapper(grid)
+        stack = LocalizationStack(ScriptedLocalizer(truth, confident_at=range(5)), None,
+                                  mapper, FusionConfig(mask_unexplained=False))
+        stack.begin_run(1)
+        for sc in scans:
+            stack.step(sc)
+        assert all(mapper.trusted)
+        assert mapper.verified == [verified] * 5
