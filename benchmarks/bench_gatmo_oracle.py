@@ -59,7 +59,7 @@ def one_seed(seed: int, runs: int, tmp: Path) -> list[dict]:
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
-    from gatmo.pipeline.evaluate import expected_pose, placement_error, tie_objects, twin_of
+    from gatmo.pipeline.evaluate import piece_outcome, tie_objects
     from gatmo.pipeline.runs import load_scans
 
     scen = simulate_scenario(tmp / f"s{seed}", preset="hall", runs=runs, seed=seed)
@@ -85,15 +85,8 @@ def one_seed(seed: int, runs: int, tmp: Path) -> list[dict]:
                 continue
             o = mapper.object_map.by_id[p2o[pid]]
             n_old, n_new = observability(scans, prev[pid], cur.get(pid))
-            exp = expected_pose(o, pid, doc["map_objects"], run["objects"])
-            md, cd = placement_error(o, exp)
-            kinds = [e["kind"] for e in events if e["object_id"] == o.id]
             rel = [e for e in events if e["object_id"] == o.id and e["kind"] == "relocated"]
-            ok = o.status in ("U", "M") and md < 0.1 and cd < 0.15
-            twin = not ok and o.status in ("U", "M") and \
-                twin_of(o, pid, doc["map_objects"], run["objects"]) is not None
-            out = ("found" if ok else "twin" if twin else "wrong" if rel
-                   else "absent" if "absent" in kinds else "missed")
+            out = piece_outcome(o, pid, doc["map_objects"], run["objects"], events)
             obs = ("both" if n_old >= 5 and n_new >= 5 else "new" if n_new >= 5
                    else "old" if n_old >= 5 else "none")
             rows.append({"seed": seed, "run": k + 1, "label": c["label"], "kind": c["kind"],

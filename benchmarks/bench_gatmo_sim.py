@@ -84,7 +84,7 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     is right, the identity swapped); wrong: its object relocated elsewhere; absent: noticed
     gone, not found; missed), and for relocations the scan index at which it happened."""
     from gatmo.maps.object_io import load_objects
-    from gatmo.pipeline.evaluate import expected_pose, placement_error, tie_objects, twin_of
+    from gatmo.pipeline.evaluate import piece_outcome, tie_objects
 
     doc = json.loads(Path(scen.scenario_json).read_text())
     folders = sorted((cmp_dir / "gatmo").glob("*"))
@@ -99,16 +99,7 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
                 continue
             o = om.by_id[p2o[c["id"]]]
             rel = [e for e in events if e["kind"] == "relocated" and e["object_id"] == o.id]
-            gone = any(e["kind"] == "absent" and e["object_id"] == o.id for e in events)
-            exp = expected_pose(o, c["id"], doc["map_objects"], run["objects"])
-            ok = False
-            if exp is not None and o.status in ("U", "M"):
-                md, cd = placement_error(o, exp)
-                ok = md < 0.1 and cd < 0.15
-            twin = not ok and o.status in ("U", "M") and \
-                twin_of(o, c["id"], doc["map_objects"], run["objects"]) is not None
-            kind = ("found" if ok else "twin" if twin else "wrong" if rel
-                    else "absent" if gone else "missed")
+            kind = piece_outcome(o, c["id"], doc["map_objects"], run["objects"], events)
             out.append({"run": k + 1, "label": c["label"], "outcome": kind,
                         "scan": rel[-1]["scan_index"] if rel else None})
     return out

@@ -103,7 +103,6 @@ class GatmoMapper:
                        "skipped_disagreement": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0}
         self._ms: list[float] = []
-        self._verified_now = True
         self._beams = None
         self._reset_run_evidence()
         self._build_owner()
@@ -282,8 +281,8 @@ class GatmoMapper:
         # untracked returns beyond, the rest of it shows in the ring test (_part_of_larger)
         reach = min(self.cfg.track_max_range_m,
                     scan.range_max_m - self.cfg.track_range_margin_m)
-        self._verified_now = bool(pose_verified)
-        self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events)
+        self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
+                    verified=bool(pose_verified))
         self._expire(stamp_s, events)
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
@@ -481,7 +480,7 @@ class GatmoMapper:
             self._try_match_gamma(g, o, stamp_s, events)
 
     # ---------------------------------------------------------- metaobjects
-    def _track(self, pts, stamp_s, events) -> None:
+    def _track(self, pts, stamp_s, events, verified: bool = True) -> None:
         c = self.cfg
         for m in self._meta:
             m.predict(stamp_s)
@@ -511,11 +510,11 @@ class GatmoMapper:
         for mid, zs in assigned.items():
             m = by_id[mid]
             m.update(np.vstack(zs), stamp_s)
-            m.n_verified += int(self._verified_now)
+            m.n_verified += int(verified)
             touched.append(m)
         for z in fresh:
             m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m)
-            m.n_verified = int(self._verified_now)
+            m.n_verified = int(verified)
             self._next_meta += 1
             self._meta.append(m)
         self._merge_metaobjects()

@@ -172,3 +172,21 @@ def twin_of(o, piece_id: int, layout0: list[dict], layout: list[dict]) -> int | 
         if md < 0.1 and cd < 0.15:
             return int(p["id"])
     return None
+
+
+def piece_outcome(o, piece_id: int, layout0: list[dict], layout: list[dict],
+                  events: list[dict]) -> str:
+    """What became of a moved piece's object by the end of a run (paper, Table II): "found"
+    (placed at the piece's true pose: 0.1 m mean footprint, 0.15 m centre), "twin" (at an
+    identical piece's true pose, :func:`twin_of`), "wrong" (relocated elsewhere), "absent"
+    (noticed gone only) or "missed". ``events``: the run's events as dicts."""
+    placed = o.status in ("U", "M")
+    exp = expected_pose(o, piece_id, layout0, layout)
+    if placed and exp is not None:
+        md, cd = placement_error(o, exp)
+        if md < 0.1 and cd < 0.15:
+            return "found"
+    if placed and twin_of(o, piece_id, layout0, layout) is not None:
+        return "twin"
+    kinds = {e["kind"] for e in events if e.get("object_id") == o.id}
+    return "wrong" if "relocated" in kinds else "absent" if "absent" in kinds else "missed"

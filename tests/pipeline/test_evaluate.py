@@ -40,3 +40,19 @@ def test_twin_of_names_the_identical_piece_the_object_now_sits_on():
     assert twin_of(_box_object([2.0, 4.0, 0.0]), 7, layout0, layout) is None  # its own place
     assert twin_of(_box_object([9.0, 4.0, 0.0]), 7, layout0, layout) is None  # other label
     assert twin_of(_box_object([7.0, 7.0, 0.0]), 7, layout0, layout) is None  # nowhere
+
+
+def test_piece_outcome_names_what_became_of_a_moved_piece():
+    from gatmo.pipeline.evaluate import piece_outcome
+
+    layout0 = [_piece(7, [2.0, 1.0, 0.0]), _piece(8, [6.0, 1.0, 0.0])]
+    layout = [_piece(7, [2.0, 4.0, 0.0]), _piece(8, [5.0, 3.0, 0.0])]
+    reloc = [{"kind": "relocated", "object_id": 1}]
+    absent = [{"kind": "absent", "object_id": 1}]
+    assert piece_outcome(_box_object([2.0, 4.0, 0.0]), 7, layout0, layout, reloc) == "found"
+    assert piece_outcome(_box_object([5.0, 3.0, 0.0]), 7, layout0, layout, reloc) == "twin"
+    assert piece_outcome(_box_object([8.0, 8.0, 0.0]), 7, layout0, layout, reloc) == "wrong"
+    gone = _box_object([2.0, 1.0, 0.0])
+    gone.status = "A"
+    assert piece_outcome(gone, 7, layout0, layout, absent) == "absent"
+    assert piece_outcome(_box_object([2.0, 1.0, 0.0]), 7, layout0, layout, []) == "missed"
