@@ -42,10 +42,18 @@ class GatmoConfig(GatmoModel):
     doubt_fraction: float = Field(0.2, gt=0, le=1)
     doubt_search_m: float = Field(1.5, gt=0, description="how far a doubted object may shift")
     confirm_min_beams: int = Field(10, ge=1, description="beams on a movable object: it is there")
-    min_agreement: float = Field(0.6, ge=0, le=1,
+    min_agreement: float = Field(0.75, ge=0, le=1,
                                  description="of beams the map expects a hit for, on it")
-    absence_min_agreement: float = Field(0.75, ge=0, le=1,
+    absence_min_agreement: float = Field(0.85, ge=0, le=1,
                                          description="stricter min_agreement for absence")
+    agreement_gone_min_beams: int = Field(
+        3, ge=1, description="an object this scan sees through with at least this many beams")
+    agreement_gone_fraction: float = Field(
+        0.7, gt=0, le=1, description="and this fraction of its beams is left out of the "
+        "agreement: it was moved, the pose is not wrong")
+    agreement_gone_max_share: float = Field(
+        0.5, ge=0, le=1, description="of the objects in view, at most this many (or one) may be "
+        "left out; more gone at once means a wrong pose")
     agreement_min_beams: int = Field(20, ge=1, description="fewer: the scan is skipped")
     min_explained_fraction: float = Field(0.3, ge=0, le=1,
                                           description="returns the map explains, else skip")

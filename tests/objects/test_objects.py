@@ -396,3 +396,41 @@ def test_returns_in_space_the_map_never_knew_are_not_added():
     (new,) = m.object_map.M
     assert np.hypot(*(new.pose_xytheta[:2] - [4.25, 1.25])) < 0.3
     assert len(m.object_map.Gamma) == 1  # the one beyond the window stays seen, never added
+
+
+def _scans_facing_east(world, n=12, fov_rad=np.pi / 2):
+    """Scans from x = 2 m looking east (90 deg field of view, 8 m range), y from 2.6 to 3.4."""
+    return [make_scan(world, (2.0, y, 0.0), n_beams=91, fov_rad=fov_rad, max_range_m=8.0,
+                      stamp_s=0.2 * i) for i, y in enumerate(np.linspace(2.6, 3.4, n))]
+
+
+@pytest.mark.parametrize("gone_min_beams, absent", [(3, True), (10_000, False)])
+def test_a_removed_object_filling_the_view_is_not_taken_for_a_wrong_pose(gone_min_beams,
+                                                                          absent):
+    # a 2 m piece that is gone fills half of what the laser sees: half the beams the map
+    # expects a hit for pass through, so the plain agreement test (walls and pieces alike)
+    # calls every pose wrong and the removal is never seen; leaving out the beams of the one
+    # object seen through as a whole, the walls agree and the piece is absent
+    m, obj, world = _one_object((10, 6), (4.5, 2.0, 5.0, 4.0), [],
+                                agreement_gone_min_beams=gone_min_beams)
+    events = []
+    for s in _scans_facing_east(world):
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=s.stamp_s)
+    assert ([(e.kind, e.object_id) for e in events] == [("absent", obj.id)]) == absent
+    assert (m.counts["skipped_disagreement"] == 12) != absent
+
+
+@pytest.mark.parametrize("max_share, skipped", [(0.5, True), (1.0, False)])
+def test_most_of_the_furniture_gone_at_once_means_a_wrong_pose(max_share, skipped):
+    # three pieces in view, all seen through in the same scans while the walls agree: that is
+    # what a filter locked onto a look-alike place sees (the columns of a hall repeat), so the
+    # plain test decides and the scans are skipped; only one piece, or up to
+    # agreement_gone_max_share of those in view, may be left out of the test
+    boxes = [(4.5, 1.2, 5.0, 2.2), (4.5, 2.6, 5.0, 3.4), (4.5, 3.8, 5.0, 4.8)]
+    m = GatmoMapper.from_config(CFG.model_copy(update={"agreement_gone_max_share": max_share}),
+                                room_grid(10, 6, 0.05, boxes=boxes))
+    m.begin_run(1)
+    for s in _scans_facing_east(room_grid(10, 6, 0.05), fov_rad=np.radians(120)):
+        m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=s.stamp_s)
+    assert (m.counts["skipped_disagreement"] == 12) == skipped
+    assert (m.counts["absent"] == 0) == skipped
