@@ -444,9 +444,9 @@ class GatmoMapper:
         changed (true poses, a rearranged hall: 41-52 % of scans skipped in a run, the
         evidence of every removal among them); a wrong pose instead disagrees a little on
         everything, walls and columns included. Only when at most one object, or
-        ``agreement_gone_max_share`` of the objects in view, is gone are any left out. Hall seeds 101 and 103, true poses against
-        poses 0.2 m off: this test at 0.85 skips 0-25 % / 59-78 %, the plain fraction at
-        0.75 skipped 7-52 % / 48-64 %."""
+        ``agreement_gone_max_share`` of the objects in view, is gone are any left out. Hall
+        seeds 101 and 103, true poses against poses 0.2 m off: this test at 0.85 skips
+        0-25 % / 59-78 %, the plain fraction at 0.75 skipped 7-52 % / 48-64 %."""
         own, _, through, on = beams[:4]
         keep = np.ones(len(own), dtype=bool)
         c = self.cfg
