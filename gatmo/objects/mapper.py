@@ -592,7 +592,7 @@ class GatmoMapper:
             near = np.hypot(*(o.pose_xytheta[:2] - c)) < self.cfg.doubt_search_m + o.extent_m()
             if near and not confirmed:
                 out.append((0 if o.id in self._doubt else 1, o))
-            elif o.status == "M" and not confirmed:
+            elif o.status == "M" and not confirmed and self.cfg.match_unseen_movable:
                 out.append((-1, o))
         return out
 
