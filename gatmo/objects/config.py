@@ -46,6 +46,9 @@ class GatmoConfig(GatmoModel):
                                  description="of beams the map expects a hit for, on it")
     absence_min_agreement: float = Field(0.85, ge=0, le=1,
                                          description="stricter min_agreement for absence")
+    absence_from_verified_only: bool = Field(
+        True, description="rays seen through objects count only from poses an independent "
+        "check confirmed (pose_verified); other poses' returns still show objects there")
     agreement_gone_min_beams: int = Field(
         3, ge=1, description="an object this scan sees through with at least this many beams")
     agreement_gone_fraction: float = Field(

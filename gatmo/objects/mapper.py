@@ -267,7 +267,8 @@ class GatmoMapper:
             self._expire(stamp_s, events)
             return events
         self._count_near_returns(pts, lp)
-        self._absence(lp, scan, pts, stamp_s, events)
+        self._absence(lp, scan, pts, stamp_s, events,
+                      sees_through=bool(pose_verified) or not self.cfg.absence_from_verified_only)
         if events:  # the map changed: explain against the new one
             near_any, explained = self._explained(pts)
         un = pts[~explained]
@@ -335,12 +336,21 @@ class GatmoMapper:
         return near, explained
 
     # Algorithm 1, with hits clearing seen-through marks (beyond the paper)
-    def _absence(self, lp, scan, pts, stamp_s, events) -> None:
+    def _absence(self, lp, scan, pts, stamp_s, events, sees_through: bool = True) -> None:
+        """Alg. 1 and the beam evidence for one scan. ``sees_through`` False (a pose only the
+        filter vouches for): the scan's returns still show objects there, but its rays and
+        beams passing through objects are no evidence they are gone."""
         g = self._grid
         c = self.cfg
         beams = self._beams
         if self._agree < c.absence_min_agreement:
             return  # a pose 0.2 m off sees through small objects
+        if not sees_through:
+            # beyond the paper: a filter locked onto the wrong place is as confident as a
+            # right one, and its pose fits the map well enough to pass the agreement test (it
+            # converged there because the scan fits); absences from such poses emptied the
+            # map of pieces that stood where they were
+            beams = (beams[0], beams[1], np.zeros_like(beams[2]), *beams[3:])
         r = scan.ranges_m
         with np.errstate(invalid="ignore"):
             far = np.isfinite(r) & (r >= scan.range_max_m) & (r < 1e6)
@@ -356,6 +366,8 @@ class GatmoMapper:
         if len(ends) == 0:
             return
         cells, ray = traverse_rays(g, lp[:2], ends, exclude_end_m=c.absence_exclude_end_m)
+        if not sees_through:
+            cells = cells[:0]
         objs = self.object_map.objects
         if len(cells):
             # free space seen this run: a relocation may not put an object there

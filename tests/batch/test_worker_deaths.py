@@ -37,7 +37,10 @@ def _check_killed_once_then_done(spec: Path, out: Path, marks: Path, res) -> Non
         killed = int((marks / job.id).read_text())  # the first attempt's process, killed
         done = json.loads((out / job.folder / "DONE.json").read_text())
         assert done["summary"]["pid"] != killed  # finished by another process: a retry
-    assert sorted(p.name for p in marks.iterdir()) == sorted(j.id for j in jobs)
+    # a worker the pool took down while it was writing its marker leaves the atomic write's
+    # temporary file (a dot file) behind; its job is killed again on the retry
+    assert sorted(p.name for p in marks.iterdir() if not p.name.startswith(".")) == \
+        sorted(j.id for j in jobs)
     chain = next(c for c in expand_jobs(spec) if len(c) == 2)
     second = json.loads((out / chain[1].folder / "DONE.json").read_text())
     assert second["objects_in"] == str(out / chain[0].folder / "objects.json")

@@ -452,3 +452,19 @@ def test_a_movable_object_not_seen_this_run_is_not_taken_by_a_look_alike(unseen_
     kinds = [(e.kind, e.object_id) for e in _drive(m, world, path, max_range_m=6.0,
                                                    n_beams=181)]
     assert (("relocated", box.id) in kinds) == relocated
+
+
+@pytest.mark.parametrize("verified_only, absent", [(True, False), (False, True)])
+def test_rays_from_unconfirmed_poses_do_not_make_objects_absent(verified_only, absent):
+    # the box is gone, but no pose of this drive was confirmed by the scan-to-map alignment
+    # (a filter locked onto the wrong place is as confident as a right one): its rays through
+    # the box are no evidence unless absence_from_verified_only is off
+    m, box, world = _one_object((10, 6), (5, 2.5, 5.5, 3.0), [],
+                                absence_from_verified_only=verified_only)
+    events = []
+    for i, x in enumerate(np.linspace(2.0, 3.0, 6)):
+        s = make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=i)
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=i,
+                           pose_verified=False)
+    assert (box.status == "A") == absent
+    assert ([e.kind for e in events] == ["absent"]) == absent
