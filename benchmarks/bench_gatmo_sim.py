@@ -68,6 +68,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
         "gone_noticed": sum(round(x.get("obj_gone", 0) * x.get("obj_absent_recall", 0.0))
                             for x in g if x.get("obj_gone", 0)),
         "false_relocations": sum(x.get("obj_false_relocations", 0) for x in g),
+        "twin_relocations": sum(x.get("obj_twin_relocations", 0) for x in g),
         "false_absences": sum(x.get("obj_false_absences", 0) for x in g),
         "map_correct_last": g[-1].get("obj_map_correct_fraction", float("nan")),
         "gatmo_ms_per_scan": res.overall["gatmo"]["ms_per_scan"],
@@ -168,6 +169,7 @@ def main(argv=None) -> int:
         "found_over_moved": float(a["found"].sum() / max(a["moved"].sum(), 1)),
         "absent_recall": float(a["gone_noticed"].sum() / max(a["gone"].sum(), 1)),
         "false_relocations_per_run": float(a["false_relocations"].sum() / (len(rows) * args.runs)),
+        "twin_relocations_per_run": float(a["twin_relocations"].sum() / (len(rows) * args.runs)),
         "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * args.runs)),
         "gatmo_ms_per_scan": float(a["gatmo_ms_per_scan"].mean()),
         "static_ms_per_scan": float(a["static_ms_per_scan"].mean()),

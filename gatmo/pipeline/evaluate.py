@@ -62,9 +62,11 @@ def true_pose_of(piece_id: int, layout: list[dict]) -> np.ndarray | None:
     return None
 
 
-def placement_error(o, expected_pose: np.ndarray) -> tuple[float, float]:
-    """(mean footprint distance, centre distance) [m] of the object vs its expected pose."""
-    est = o.cells_world()
+def placement_error(o, expected_pose: np.ndarray,
+                    pose_xytheta: np.ndarray | None = None) -> tuple[float, float]:
+    """(mean footprint distance, centre distance) [m] of the object at ``pose_xytheta``
+    (default its current pose) vs its expected pose."""
+    est = o.cells_world(pose_xytheta)
     ref = o.cells_world(expected_pose)
     d, _ = cKDTree(ref).query(est)
     return float(np.mean(d)), float(np.hypot(*(est.mean(0) - ref.mean(0))))
@@ -77,7 +79,9 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     moved: tied pieces that moved in this run (moved/shifted); found: those whose object ends
     the run correctly placed with its id; absent_recall: moved or removed tied pieces whose
     object was taken off its old place (absent or relocated); false_relocations: relocation
-    events this run that left an object in the wrong place.
+    events this run that left an object in the wrong place, and twin_relocations those that
+    put it at the true pose of an identical piece instead (the map right, the identity
+    swapped; counted among false_relocations until 2026-11-24).
     """
     r = scenario["runs"][run - 1]
     layout0 = scenario["map_objects"]
@@ -103,20 +107,20 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     off = sum(1 for pid in gone if by_id[piece_to_obj[pid]].status == "A"
               or any(e.get("object_id") == piece_to_obj[pid] and e.get("kind") == "relocated"
                      for e in events))
-    false_reloc = 0
+    false_reloc = twin_reloc = 0
     for e in events:
         if e.get("kind") != "relocated" or e.get("object_id") not in ties:
             continue
         o = by_id[e["object_id"]]
         exp = expected_pose(o, ties[o.id], layout0, layout)
         pose_then = np.asarray(e["pose_new"], dtype=float)
-        if exp is None:
-            false_reloc += 1
-            continue
-        ref = o.cells_world(exp)
-        est = o.cells_world(pose_then)
-        d, _ = cKDTree(ref).query(est)
-        if float(np.mean(d)) >= 0.1:
+        if exp is not None:
+            d, _ = cKDTree(o.cells_world(exp)).query(o.cells_world(pose_then))
+            if float(np.mean(d)) < 0.1:
+                continue
+        if twin_of(o, ties[o.id], layout0, layout, pose_then) is not None:
+            twin_reloc += 1  # the map is right, an identical piece's identity swapped
+        else:
             false_reloc += 1
     false_abs = 0
     for e in events:
@@ -142,7 +146,8 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
         "found_fraction": found / len(moved) if moved else float("nan"),
         "placement_error_m": float(np.mean(errors)) if errors else float("nan"),
         "gone": len(gone), "absent_recall": off / len(gone) if gone else float("nan"),
-        "false_relocations": false_reloc, "false_absences": false_abs,
+        "false_relocations": false_reloc, "twin_relocations": twin_reloc,
+        "false_absences": false_abs,
         "map_correct_fraction": correct / total if total else float("nan"),
     }
 
@@ -156,10 +161,12 @@ def expected_pose(o, piece_id: int, layout0: list[dict], layout: list[dict]):
     return compose(pk, compose(inverse(p0), o.base_pose_xytheta))
 
 
-def twin_of(o, piece_id: int, layout0: list[dict], layout: list[dict]) -> int | None:
+def twin_of(o, piece_id: int, layout0: list[dict], layout: list[dict],
+            pose_xytheta: np.ndarray | None = None) -> int | None:
     """The id of another piece with the same label whose true pose in ``layout`` the object
-    (tied to ``piece_id``) now occupies, or None: identical pieces that swapped places look the
-    same to a laser, so the map is right while the identity is not."""
+    (tied to ``piece_id``) occupies at ``pose_xytheta`` (default: now), or None: identical
+    pieces that swapped places look the same to a laser, so the map is right while the
+    identity is not."""
     p0 = true_pose_of(piece_id, layout0)
     label = next((p["label"] for p in layout0 if p["id"] == piece_id), None)
     if p0 is None or o.base_pose_xytheta is None:
@@ -168,7 +175,8 @@ def twin_of(o, piece_id: int, layout0: list[dict], layout: list[dict]) -> int | 
     for p in layout:
         if p["id"] == piece_id or p["label"] != label:
             continue
-        md, cd = placement_error(o, compose(np.array(p["pose"], dtype=float), rel))
+        md, cd = placement_error(o, compose(np.array(p["pose"], dtype=float), rel),
+                                 pose_xytheta)
         if md < 0.1 and cd < 0.15:
             return int(p["id"])
     return None

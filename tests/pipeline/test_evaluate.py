@@ -56,3 +56,24 @@ def test_piece_outcome_names_what_became_of_a_moved_piece():
     gone.status = "A"
     assert piece_outcome(gone, 7, layout0, layout, absent) == "absent"
     assert piece_outcome(_box_object([2.0, 1.0, 0.0]), 7, layout0, layout, []) == "missed"
+
+
+def test_score_run_tells_twin_swaps_from_false_relocations():
+    from gatmo.objects.objectmap import ObjectMap
+    from gatmo.pipeline.evaluate import score_run
+
+    o = _box_object([2.0, 4.0, 0.0])
+    om = ObjectMap([o], 0.05)
+    layout0 = [_piece(7, [2.0, 1.0, 0.0]), _piece(8, [6.0, 1.0, 0.0])]
+    layout = [_piece(7, [2.0, 4.0, 0.0]), _piece(8, [5.0, 3.0, 0.0])]
+    scen = {"map_objects": layout0,
+            "runs": [{"objects": layout, "changes": [{"id": 7, "kind": "moved"},
+                                                     {"id": 8, "kind": "moved"}]}]}
+
+    def reloc(x, y):
+        return {"kind": "relocated", "object_id": 1, "pose_new": [x, y, 0.0]}
+
+    events = [reloc(2.0, 4.0), reloc(5.0, 3.0), reloc(5.0, 3.0), reloc(8.0, 8.0)]
+    r = score_run(om, {1: 7}, scen, 1, events)
+    assert (r["false_relocations"], r["twin_relocations"]) == (1, 2)
+    assert r["found"] == 1  # it ends the run at its own piece's true pose
