@@ -28,7 +28,7 @@ import numpy as np
 from scipy import ndimage
 
 from gatmo.datasets.types import Scan
-from gatmo.geometry import compose, transform_points, wrap_angle
+from gatmo.geometry import compose, transform_points
 from gatmo.maps.grid import FREE, OccupancyGrid
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
@@ -66,6 +66,18 @@ def _diameter(points_xy: np.ndarray) -> float:
         hull = points_xy
     d = hull[:, None, :] - hull[None, :, :]
     return float(np.sqrt((d**2).sum(-1).max()))
+
+
+def _footprint_shift_m(o: MapObject, pose_a: np.ndarray, pose_b: np.ndarray) -> float:
+    """How far the object's footprint moves from ``pose_a`` to ``pose_b`` [m]: the Hausdorff
+    distance between its cells at the two poses. A symmetric outline turned half a turn about
+    its centre does not move (a table found with its yaw flipped is where it was)."""
+    from scipy.spatial import cKDTree
+
+    a, b = o.cells_world(pose_a), o.cells_world(pose_b)
+    if len(a) == 0:
+        return 0.0
+    return float(max(cKDTree(a).query(b)[0].max(), cKDTree(b).query(a)[0].max()))
 
 
 STRUCTURE = -2  # owner code of walls, columns and specks too small to be objects
@@ -755,8 +767,7 @@ class GatmoMapper:
                   support_scans: int | None = None) -> None:
         old = o.pose_xytheta.copy()
         o.pose_xytheta = mt.pose_xytheta.copy()
-        moved = np.hypot(*(old[:2] - o.pose_xytheta[:2])) > 0.1 or \
-            abs(wrap_angle(old[2] - o.pose_xytheta[2])) > np.radians(5)
+        moved = _footprint_shift_m(o, old, o.pose_xytheta) > 0.1
         o.status = "M" if (moved or o.moved_count) else "U"
         kind = "relocated" if moved else "restored"
         o.moved_count += int(moved)

@@ -468,3 +468,20 @@ def test_rays_from_unconfirmed_poses_do_not_make_objects_absent(verified_only, a
                            pose_verified=False)
     assert (box.status == "A") == absent
     assert ([e.kind for e in events] == ["absent"]) == absent
+
+
+@pytest.mark.parametrize("offset, kind", [((0.0, 0.0, np.pi), "restored"),
+                                          ((0.0, 0.0, np.pi / 2), "relocated"),
+                                          ((0.3, 0.0, 0.0), "relocated"),
+                                          ((0.04, 0.0, 0.05), "restored")])
+def test_a_relocation_is_a_move_only_if_the_footprint_moves(offset, kind):
+    # a 0.5 x 0.3 m box found with its yaw turned half a turn stands where it stood (a
+    # symmetric outline), a quarter turn or a 0.3 m shift is a move, 4 cm and 3 deg is not
+    from gatmo.objects.matching import Match
+
+    m, box, _ = _one_object((10, 6), (5.0, 2.5, 5.5, 2.8), [])
+    new = box.pose_xytheta + np.array(offset)
+    events = []
+    m._relocate(box, Match(box.id, 0.9, new), 1.0, events)
+    assert [e.kind for e in events if e.object_id == box.id] == [kind]
+    assert box.moved_count == int(kind == "relocated")
