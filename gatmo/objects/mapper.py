@@ -116,7 +116,6 @@ class GatmoMapper:
                        "gamma_unverified": 0}
         self._ms: list[float] = []
         self._beams = None
-        self._agree = 1.0
         self._reset_run_evidence()
         self._build_owner()
 
@@ -270,7 +269,6 @@ class GatmoMapper:
             return events
         self._beams = beams = self._classify_beams(lp, scan)
         n, on = self._agreement(beams)
-        self._agree = on / max(n, 1)
         if n < self.cfg.agreement_min_beams or on < self.cfg.min_agreement * n:
             # beyond the paper: too little of what the map expects (walls, columns, furniture
             # that stayed) is where this pose says; a wrong pose sees through small objects
@@ -279,7 +277,7 @@ class GatmoMapper:
             self._expire(stamp_s, events)
             return events
         self._count_near_returns(pts, lp)
-        self._absence(lp, scan, pts, stamp_s, events,
+        self._absence(lp, scan, pts, stamp_s, events, agreement=on / max(n, 1),
                       sees_through=bool(pose_verified) or not self.cfg.absence_from_verified_only)
         if events:  # the map changed: explain against the new one
             near_any, explained = self._explained(pts)
@@ -348,14 +346,16 @@ class GatmoMapper:
         return near, explained
 
     # Algorithm 1, with hits clearing seen-through marks (beyond the paper)
-    def _absence(self, lp, scan, pts, stamp_s, events, sees_through: bool = True) -> None:
-        """Alg. 1 and the beam evidence for one scan. ``sees_through`` False (a pose only the
-        filter vouches for): the scan's returns still show objects there, but its rays and
-        beams passing through objects are no evidence they are gone."""
+    def _absence(self, lp, scan, pts, stamp_s, events, agreement: float,
+                 sees_through: bool = True) -> None:
+        """Alg. 1 and the beam evidence for one scan whose pose agrees with the map on
+        ``agreement`` of the beams (:meth:`_agreement`). ``sees_through`` False (a pose only
+        the filter vouches for): the scan's returns still show objects there, but its rays
+        and beams passing through objects are no evidence they are gone."""
         g = self._grid
         c = self.cfg
         beams = self._beams
-        if self._agree < c.absence_min_agreement:
+        if agreement < c.absence_min_agreement:
             return  # a pose 0.2 m off sees through small objects
         if not sees_through:
             # beyond the paper: a filter locked onto the wrong place is as confident as a
@@ -377,21 +377,9 @@ class GatmoMapper:
             ends = np.vstack([ends, far_pts])
         if len(ends) == 0:
             return
-        cells, ray = traverse_rays(g, lp[:2], ends, exclude_end_m=c.absence_exclude_end_m)
-        if not sees_through:
-            cells = cells[:0]
+        if sees_through:
+            self._mark_seen_through(lp, ends)
         objs = self.object_map.objects
-        if len(cells):
-            # free space seen this run: a relocation may not put an object there
-            np.add.at(self._free, (cells[:, 1], cells[:, 0]), 1)
-            own = self._owner[cells[:, 1], cells[:, 0]]
-            sel = own >= 0
-            for i in np.unique(own[sel]):
-                o = objs[int(i)]
-                m = own == i
-                seen = self._seen.setdefault(o.id, set())
-                seen.update(self._local[cells[m, 1], cells[m, 0]].tolist())
-                self._rays[o.id] = self._rays.get(o.id, 0) + len(np.unique(ray[m]))
         hit_cells = g.world_to_cell(pts)
         okh = g.in_bounds(hit_cells)
         # a return is stronger evidence than rays passing: cells with returns are not free
@@ -431,6 +419,24 @@ class GatmoMapper:
         for o in gone:  # after the loop: marking re-renders and re-indexes the owner grid
             if o.status in ("U", "M"):
                 self._mark_absent(o, stamp_s, events)
+
+    def _mark_seen_through(self, lp, ends) -> None:
+        """Rays from the laser at ``lp`` to ``ends`` (R, 2): the cells they cross are seen
+        free this run (a relocation may not put an object there) and, on an object, seen
+        through (Alg. 1's I'_i)."""
+        g = self._grid
+        cells, ray = traverse_rays(g, lp[:2], ends, exclude_end_m=self.cfg.absence_exclude_end_m)
+        if not len(cells):
+            return
+        np.add.at(self._free, (cells[:, 1], cells[:, 0]), 1)
+        objs = self.object_map.objects
+        own = self._owner[cells[:, 1], cells[:, 0]]
+        for i in np.unique(own[own >= 0]):
+            o = objs[int(i)]
+            m = own == i
+            seen = self._seen.setdefault(o.id, set())
+            seen.update(self._local[cells[m, 1], cells[m, 0]].tolist())
+            self._rays[o.id] = self._rays.get(o.id, 0) + len(np.unique(ray[m]))
 
     def _classify_beams(self, lp, scan):
         """Per beam: (owner of the cell the map expects it to end on: object index, STRUCTURE

@@ -114,10 +114,8 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
         o = by_id[e["object_id"]]
         exp = expected_pose(o, ties[o.id], layout0, layout)
         pose_then = np.asarray(e["pose_new"], dtype=float)
-        if exp is not None:
-            d, _ = cKDTree(o.cells_world(exp)).query(o.cells_world(pose_then))
-            if float(np.mean(d)) < 0.1:
-                continue
+        if exp is not None and placement_error(o, exp, pose_then)[0] < 0.1:
+            continue
         if twin_of(o, ties[o.id], layout0, layout, pose_then) is not None:
             twin_reloc += 1  # the map is right, an identical piece's identity swapped
         else:
