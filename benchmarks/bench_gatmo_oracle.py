@@ -3,7 +3,8 @@ moved or shifted piece, whether the robot saw through its old place and saw it a
 (from the simulator's truth), and what GATMO made of it. Separates GATMO's own accuracy from
 the localizer's.
 
-    python -m benchmarks.bench_gatmo_oracle [--seeds 5] [--first-seed 100]
+    python -m benchmarks.bench_gatmo_oracle [--seeds 5] [--first-seed 100] [--procs 2]
+        [--return-prob 0.3 --runs 6] [--set gatmo.prior_earlier_poses=false --tag _noprior]
 
 Outcomes: found (right object, true pose), twin (at an identical piece's true pose: the map is
 right, the identity swapped), wrong (relocated elsewhere), absent (noticed gone, not found),
@@ -15,10 +16,14 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+from benchmarks._overrides import add_override_args
 
 OUT = Path("bench-out")
 
@@ -54,17 +59,22 @@ def observability(scans, piece_old: dict, piece_new: dict | None, res: float = 0
     return n_old, n_new
 
 
-def one_seed(seed: int, runs: int, tmp: Path) -> list[dict]:
-    from gatmo.datasets.sim import simulate_scenario
+def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
+             overrides: list[str] | None = None) -> list[dict]:
+    from benchmarks._overrides import with_overrides
+    from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
     from gatmo.pipeline.evaluate import piece_outcome, tie_objects
     from gatmo.pipeline.runs import load_scans
 
-    scen = simulate_scenario(tmp / f"s{seed}", preset="hall", runs=runs, seed=seed)
+    sim = SimConfig.for_preset("hall")
+    sim.rearrange.return_prob = return_prob
+    scen = simulate_scenario(tmp / f"s{seed}", preset="hall", runs=runs, seed=seed, config=sim)
     doc = json.loads(Path(scen.scenario_json).read_text())
-    mapper = GatmoMapper.from_config(sim_stack_config().gatmo, load_map(scen.map_yaml))
+    cfg = with_overrides(sim_stack_config(), overrides)
+    mapper = GatmoMapper.from_config(cfg.gatmo, load_map(scen.map_yaml))
     p2o = {v: k for k, v in tie_objects(mapper.object_map, doc).items()}
     prev = {p["id"]: p for p in doc["map_objects"]}
     rows = []
@@ -90,7 +100,7 @@ def one_seed(seed: int, runs: int, tmp: Path) -> list[dict]:
             obs = ("both" if n_old >= 5 and n_new >= 5 else "new" if n_new >= 5
                    else "old" if n_old >= 5 else "none")
             rows.append({"seed": seed, "run": k + 1, "label": c["label"], "kind": c["kind"],
-                         "observed": obs, "outcome": out,
+                         "returned": bool(c.get("returned")), "observed": obs, "outcome": out,
                          "scans_to_match": rel[-1]["support_scans"] if rel else None})
         prev = cur
     return rows
@@ -101,14 +111,21 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--runs", type=int, default=4)
+    ap.add_argument("--return-prob", type=float, default=0.0,
+                    help="per piece and run, the chance it is put back where it stood before")
+    ap.add_argument("--procs", type=int, default=1, help="seeds run in parallel")
+    add_override_args(ap)
     args = ap.parse_args(argv or [])
     rows: list[dict] = []
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(args.first_seed, args.first_seed + args.seeds):
-            r = one_seed(seed, args.runs, Path(tmp))
-            rows += r
-            print(seed, json.dumps([(x["label"], x["observed"], x["outcome"]) for x in r]),
-                  flush=True)
+        job = partial(one_seed, runs=args.runs, tmp=Path(tmp), return_prob=args.return_prob,
+                      overrides=args.set)
+        with ProcessPoolExecutor(args.procs) as ex:
+            for seed, r in zip(seeds, ex.map(job, seeds), strict=True):
+                rows += r
+                print(seed, json.dumps([(x["label"], x["observed"], x["outcome"]) for x in r]),
+                      flush=True)
     table: dict = {}
     for r in rows:
         d = table.setdefault(r["observed"], {"found": 0, "twin": 0, "wrong": 0, "absent": 0,
@@ -123,9 +140,15 @@ def main(argv=None) -> int:
              "found_or_twin_of_seen_both": (both.get("found", 0) + both.get("twin", 0)) / n_both,
              "wrong_per_run": sum(d["wrong"] for d in table.values()) / (args.seeds * args.runs),
              "median_scans_to_match": float(np.median(scans)) if scans else None}
+    back = [r for r in rows if r["returned"] and r["observed"] == "both"]
+    if back:  # pieces put back where they stood before (--return-prob)
+        total["returned_seen_both"] = len(back)
+        total["found_of_returned_seen_both"] = sum(r["outcome"] == "found" for r in back) / len(
+            back)
     print(json.dumps(total, indent=1))
     OUT.mkdir(exist_ok=True)
-    (OUT / "gatmo_oracle.json").write_text(json.dumps({"rows": rows, "total": total}, indent=1))
+    (OUT / f"gatmo_oracle{args.tag}.json").write_text(
+        json.dumps({"rows": rows, "total": total}, indent=1))
     return 0
 
 

@@ -1,6 +1,7 @@
 """Soak (issue 7): many consecutive simulated runs with the object map carried over, the
 furniture rearranged every time. Per run: objects placed in the map vs pieces in the world,
-peak RSS, ms per scan, localization error, and the relocations (moved pieces found with their
+peak RSS, ms per scan, localization error (and the static-map localizer's on the same log,
+the peer), and the relocations (moved pieces found with their
 id at the true pose, false relocations, the fraction of the map's pieces placed right). What
 must stay flat stays flat, or it shows here.
 
@@ -57,6 +58,12 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None) -> 
         events += [e.as_dict() for e in stack.end_run()]
         score = score_run(mapper.object_map, ties, doc, k + 1, events)
         ms = (time.perf_counter() - t0) * 1e3 / len(scans)
+        # the peer: the static-map localizer alone on the same log, same seed
+        static = make_localizer(cfg, base, k, scans[0].gt_pose_xytheta, False)
+        static_err = []
+        for s in scans:
+            est = static.update(s.odom_pose_xytheta, s)
+            static_err.append(np.hypot(*(est.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
         om = mapper.object_map
         rows.append({
             "run": k + 1,
@@ -67,6 +74,9 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None) -> 
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "ms_per_scan": ms,
             "median_err_m": float(np.median(err)),
+            "static_median_err_m": float(np.median(static_err)),
+            "lost_fraction": float(np.mean(np.asarray(err) > 0.5)),
+            "static_lost_fraction": float(np.mean(np.asarray(static_err) > 0.5)),
             "moved": score["moved"], "found": score["found"],
             "false_relocations": score["false_relocations"],
             "map_correct_fraction": score["map_correct_fraction"],

@@ -64,7 +64,10 @@ def save_objects(path: str | Path, object_map: ObjectMap, *, base_grid_meta: dic
 
 
 def _pose(v, path, where) -> np.ndarray:
-    a = np.asarray(v, dtype=float) if isinstance(v, list) else None
+    try:
+        a = np.asarray(v, dtype=float) if isinstance(v, list) else None
+    except (TypeError, ValueError):
+        a = None
     if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
         raise FormatError(f"expected [x, y, yaw], got {v!r}", file=path, field=where)
     return a
@@ -127,6 +130,12 @@ def load_objects(path: str | Path) -> ObjectMap:
             hist = d.get("history", [])
             if not isinstance(hist, list):
                 raise FormatError("history must be a list", file=path, field=f"{where}.history")
+            for j, h in enumerate(hist):  # earlier poses are priors for matching: checked
+                hw = f"{where}.history[{j}]"
+                if not isinstance(h, dict) or h.get("status") not in STATUSES:
+                    raise FormatError(f"history entries need a status in {STATUSES}",
+                                      file=path, field=hw)
+                h["pose"] = [float(v) for v in _pose(h.get("pose"), path, f"{hw}.pose")]
             o = MapObject(
                 id=oid, label=label, status=status,
                 pose_xytheta=_pose(d["pose"], path, f"{where}.pose"),

@@ -83,6 +83,14 @@ class GatmoConfig(GatmoModel):
         "was not seen this run (after match_patience_scans); off: a piece not visited yet is "
         "taken by any look-alike chair (true poses, hall seeds 100-105: 2.2 false relocations "
         "per run with it, 1.75 without, and more pieces found)")
+    prior_earlier_poses: bool = Field(
+        True, description="every pose an object stood at keeps a prior: a chair that matches "
+        "an object at one of its earlier poses is preferred over other candidates, and may "
+        "relocate a movable object whose place was not seen this run (people put chairs back "
+        "where they were)")
+    earlier_pose_tolerance_m: float = Field(
+        0.15, gt=0, description="a match this close (footprint distance) to an earlier pose "
+        "is at that pose")
     match_min_edge_fraction: float = Field(0.3, ge=0, le=1)
     match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
     match_max_free_fraction: float = Field(0.05, ge=0, le=1)

@@ -606,7 +606,10 @@ class GatmoMapper:
         """(tier, object) pairs a chair may be: absent ones (paper) and placed ones near it in
         doubt, tier 0; placed ones near it not yet seen at their place this run, tier 1 (a
         shift: only a match near their pose counts, then as tier 0); movable ones elsewhere
-        not seen at their place this run (paper: A and M), tier -1."""
+        not seen at their place this run (paper: A and M), tier -1; with
+        ``prior_earlier_poses``, movable ones elsewhere not seen at their place this run that
+        stood near the chair before, tier -2 (only a match at an earlier pose counts, then as
+        tier 0)."""
         c = pts.mean(axis=0)
         out = []
         for o in self.object_map.objects:
@@ -624,7 +627,25 @@ class GatmoMapper:
                 out.append((0 if o.id in self._doubt else 1, o))
             elif o.status == "M" and not confirmed and self.cfg.match_unseen_movable:
                 out.append((-1, o))
+            elif o.status == "M" and not confirmed and self.cfg.prior_earlier_poses:
+                q = o.earlier_poses()
+                if np.any(np.hypot(*(q[:, :2] - c).T) < self.cfg.doubt_search_m + o.extent_m()):
+                    out.append((-2, o))
         return out
+
+    def _at_earlier_pose(self, o: MapObject, pose_xytheta: np.ndarray) -> bool:
+        """The object at ``pose_xytheta`` stands where it stood before (within
+        ``earlier_pose_tolerance_m``; its current pose counts for an absent object)."""
+        if not self.cfg.prior_earlier_poses:
+            return False
+        for q in o.earlier_poses():
+            if o.status != "A" and np.allclose(q, o.pose_xytheta):
+                continue  # where it is placed now is no earlier pose
+            if abs(np.hypot(*(q[:2] - pose_xytheta[:2]))) > o.extent_m() + 0.5:
+                continue
+            if _footprint_shift_m(o, q, pose_xytheta) <= self.cfg.earlier_pose_tolerance_m:
+                return True
+        return False
 
     def _field(self, o: MapObject) -> EdgeField:
         f = self._fields.get(o.id)
@@ -642,7 +663,7 @@ class GatmoMapper:
         cands = self._candidates(pts)
         everything = m.chair_points(min_count=1, min_fraction=0.0)
         for tier, o in cands:
-            if tier < 0 and m.n_obs < self.cfg.match_patience_scans:
+            if tier == -1 and m.n_obs < self.cfg.match_patience_scans:
                 continue  # a movable object seen nowhere yet: only once nothing absent fits
             if diam_p > _diameter(o.shape_xy) + 3 * o.resolution_m:
                 continue  # what is seen is larger than the object
@@ -665,10 +686,13 @@ class GatmoMapper:
             # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
             if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
                 continue
-            if tier == 1:  # a shift nearby counts as much as a doubted object
+            earlier = self._at_earlier_pose(o, mt.pose_xytheta)
+            if tier == -2 and not earlier:
+                continue
+            if tier in (1, -2):  # a shift nearby, or back where it stood: as good as doubted
                 tier = 0
-            # tier first; look-alikes: prefer the nearest one
-            key = (tier, round(mt.score * 20) / 20, -dist)
+            # tier first, then an earlier pose (its prior); look-alikes: prefer the nearest
+            key = (tier, earlier, round(mt.score * 20) / 20, -dist)
             rivals.append((key, o, mt))
             if best is None or key > best[0]:
                 best = (key, o, mt)
@@ -679,7 +703,7 @@ class GatmoMapper:
         if patient:
             # a different-looking candidate nearly as good: wait for more of the object
             for k2, o2, _ in rivals:
-                if (o2 is not o and k2[0] == best[0][0] and k2[1] >= best[0][1] - 0.05
+                if (o2 is not o and k2[:2] == best[0][:2] and k2[2] >= best[0][2] - 0.05
                         and not lookalike(o2, o, self.cfg.lookalike_tolerance)):
                     return False
         self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)

@@ -61,6 +61,17 @@ class MapObject:
                              "pose": [float(v) for v in self.pose_xytheta],
                              "status": self.status})
 
+    def earlier_poses(self) -> np.ndarray:
+        """(K, 3) poses where the object stood before: where the static map drew it and every
+        pose it was placed at since (U or M in its history), in order, without repeats."""
+        poses = [] if self.base_pose_xytheta is None else [np.asarray(self.base_pose_xytheta)]
+        for h in self.history:
+            if h.get("status") in ("U", "M"):
+                q = np.asarray(h["pose"], dtype=float)
+                if not any(np.allclose(q, p) for p in poses):
+                    poses.append(q)
+        return np.array(poses, dtype=float).reshape(-1, 3)
+
     def extent_m(self) -> float:
         if len(self.shape_xy) == 0:
             return 0.0

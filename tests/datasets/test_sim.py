@@ -255,6 +255,45 @@ def test_rearrangement_keeps_ids_and_pieces_apart():
     assert {"moved", "shifted", "added"} <= kinds
 
 
+def test_pieces_put_back_where_they_stood_before(tmp_path):
+    # return_prob: a piece goes back to one of its poses in earlier layouts (chairs back at
+    # their desks); the scenario keeps those poses per piece and flags the change "returned"
+    rng = np.random.default_rng(5)
+    cfg = SimConfig.for_preset("hall").rearrange.model_copy(
+        update={"move_prob": 0.0, "shift_prob": 0.0, "remove_prob": 0.0, "return_prob": 1.0,
+                "add_count": 0})
+    world, route = make_world("hall", rng)
+    moved = world.copy()
+    earlier = {}
+    for p in moved.pieces:  # every piece stood 2 m to the side (in free space or not)
+        earlier[p.id] = [p.pose_xytheta.copy()]
+        p.pose_xytheta = p.pose_xytheta + np.array([0.0, 0.0, 0.3])
+    new, changes, _ = rearrange(moved, route, cfg, rng, 1000, earlier={
+        pid: [q + np.array([2.0, 0.0, 0.0]), q] for pid, (q,) in earlier.items()})
+    assert changes and all(c["kind"] == "moved" and c["returned"] for c in changes)
+    for c in changes:
+        assert any(np.allclose(c["new_pose"], q + d, atol=1e-8) for q in earlier[c["id"]]
+                   for d in (np.zeros(3), np.array([2.0, 0.0, 0.0])))
+    # without earlier poses, nothing to go back to: the layout stays
+    new, changes, _ = rearrange(moved, route, cfg, rng, 1000)
+    assert changes == []
+    # a scenario with returns: its changes say which moves went back to an earlier pose
+    sim = short_cfg("hall", 5.0)
+    sim.rearrange.return_prob = 0.5
+    scen = simulate_scenario(tmp_path, runs=4, seed=3, config=sim)
+    doc = json.loads(scen.scenario_json.read_text())
+    seen = {p["id"]: [p["pose"]] for p in doc["map_objects"]}
+    back = 0
+    for run in doc["runs"]:
+        for c in run["changes"]:
+            if c.get("returned"):
+                back += 1
+                assert any(np.allclose(c["new_pose"], q, atol=1e-6) for q in seen[c["id"]])
+        for p in run["objects"]:
+            seen.setdefault(p["id"], []).append(p["pose"])
+    assert back > 0
+
+
 def test_people_never_inside_furniture_or_walls():
     rng = np.random.default_rng(6)
     cfg = short_cfg("hall", 40.0)

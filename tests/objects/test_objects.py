@@ -283,6 +283,13 @@ def test_objects_json_round_trip_and_errors(tmp_path):
     with pytest.raises(FormatError) as e:
         load_objects(tmp_path / "bad.json")
     assert e.value.field == "objects[0].pose"
+    # history poses are read (priors for matching), so they are checked too
+    doc = json.loads((tmp_path / "o.json").read_text())
+    doc["objects"][1]["history"][0]["pose"] = [1.0, "x", 0.0]
+    (tmp_path / "hist.json").write_text(json.dumps(doc))
+    with pytest.raises(FormatError) as e:
+        load_objects(tmp_path / "hist.json")
+    assert e.value.field == "objects[1].history[0].pose"
 
 
 def test_end_to_end_moved_box_is_relocated_with_its_id():
@@ -485,3 +492,30 @@ def test_a_relocation_is_a_move_only_if_the_footprint_moves(offset, kind):
     m._relocate(box, Match(box.id, 0.9, new), 1.0, events)
     assert [e.kind for e in events if e.object_id == box.id] == [kind]
     assert box.moved_count == int(kind == "relocated")
+
+
+@pytest.mark.parametrize("prior, earlier_offset, relocated", [
+    (True, (5.0, 0.0), True),   # seen where it stood before: back there, its place unseen
+    (True, (5.0, 1.0), False),  # it stood elsewhere: a look-alike, not evidence it moved
+    (False, (5.0, 0.0), False),  # no prior: a piece not visited yet is not taken
+])
+def test_an_object_seen_where_it_stood_before_is_put_back(prior, earlier_offset, relocated):
+    # the box stood 5 m to the east in an earlier run and was moved back west; this run the
+    # robot sees a box at that earlier place and never looks west: every earlier pose keeps a
+    # prior, so the chair there relocates it although its current place was not seen
+    m, box, world = _one_object((10, 6), (1.0, 2.5, 1.5, 3.0),
+                                [(1.0, 2.5, 1.5, 3.0), (6.0, 2.5, 6.5, 3.0)],
+                                prior_earlier_poses=prior)
+    home = box.pose_xytheta.copy()
+    box.status = "M"
+    box.pose_xytheta = home + np.array([*earlier_offset, 0.0])
+    box.record(0, 0.0)
+    box.pose_xytheta = home
+    box.record(0, 1.0)
+    path = [(4.0, y, 0.0) for y in np.linspace(2.2, 3.3, 45)]
+    events = _drive(m, world, path, max_range_m=6.0, n_beams=181)
+    kinds = [(e.kind, e.object_id) for e in events]
+    assert (("relocated", box.id) in kinds) == relocated
+    if relocated:
+        np.testing.assert_allclose(box.pose_xytheta[:2], home[:2] + [5.0, 0.0], atol=0.06)
+        assert len(box.earlier_poses()) == 3  # the map's pose, east, west; east again is no new

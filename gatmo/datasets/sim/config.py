@@ -41,19 +41,22 @@ class PeopleConfig(GatmoModel):
 
 
 class RearrangeConfig(GatmoModel):
-    """Per piece and run: moved elsewhere / shifted and turned in place / removed; plus adds."""
+    """Per piece and run: moved elsewhere / shifted and turned in place / removed / put back
+    where it stood in an earlier layout (``return_prob``: chairs go back to their desks); plus
+    adds."""
 
     move_prob: float = Field(0.15, ge=0, le=1)
     shift_prob: float = Field(0.15, ge=0, le=1)
     remove_prob: float = Field(0.03, ge=0, le=1)
+    return_prob: float = Field(0.0, ge=0, le=1)
     add_count: int = Field(1, ge=0)
     shift_min_m: float = Field(0.2, ge=0)
     shift_max_m: float = Field(1.0, ge=0)
 
     @model_validator(mode="after")
     def _consistent(self) -> RearrangeConfig:
-        if self.move_prob + self.shift_prob + self.remove_prob > 1.0 + 1e-9:
-            raise ValueError("move_prob + shift_prob + remove_prob must be <= 1")
+        if self.move_prob + self.shift_prob + self.remove_prob + self.return_prob > 1.0 + 1e-9:
+            raise ValueError("move_prob + shift_prob + remove_prob + return_prob must be <= 1")
         if self.shift_min_m > self.shift_max_m:
             raise ValueError("shift_min_m must be <= shift_max_m")
         return self

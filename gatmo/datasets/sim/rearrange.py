@@ -1,7 +1,9 @@
 """Rearranging furniture between runs: moved elsewhere, shifted and turned, removed, added.
 
 Each piece independently, with the config's probabilities, is removed, moved to a new free place
-(random yaw), or shifted by ``shift_min_m..shift_max_m`` and turned by up to 60 deg; then
+(random yaw), shifted by ``shift_min_m..shift_max_m`` and turned by up to 60 deg, or put back
+at one of its poses in earlier layouts (``return_prob``; a change of kind "moved" with
+``"returned": true``); then
 ``add_count`` new pieces (new ids, random labels) appear. Every new pose passes
 :func:`gatmo.datasets.sim.presets.placement_ok` (no overlaps, route kept clear); a piece whose move
 finds no room stays where it was.
@@ -24,15 +26,20 @@ def _pose(p: np.ndarray | None) -> list[float] | None:
 
 
 def rearrange(world: World, route: np.ndarray, cfg: RearrangeConfig, rng: np.random.Generator,
-              next_id: int) -> tuple[World, list[dict], int]:
+              next_id: int, earlier: dict[int, list[np.ndarray]] | None = None,
+              ) -> tuple[World, list[dict], int]:
     """A new layout (``world`` is left unchanged), the list of changes
     ``{id, label, kind, old_pose, new_pose}`` (poses (x, y, theta) or None), and the next free id.
-    Ids of pieces that stay are stable; added pieces get ids from ``next_id`` on."""
+    Ids of pieces that stay are stable; added pieces get ids from ``next_id`` on. ``earlier``:
+    per piece id, its poses (3,) in earlier layouts (for ``return_prob``)."""
     new = world.copy()
     changes: list[dict] = []
+    earlier = earlier or {}
+    p_other = cfg.remove_prob + cfg.move_prob + cfg.shift_prob
     for piece in list(new.pieces):
         old = piece.pose_xytheta.copy()
         u = rng.random()
+        returned = False
         if u < cfg.remove_prob:
             new.pieces.remove(piece)
             changes.append({"id": piece.id, "label": piece.label, "kind": "removed",
@@ -51,6 +58,13 @@ def rearrange(world: World, route: np.ndarray, cfg: RearrangeConfig, rng: np.ran
                 if placement_ok(piece, new.pieces, new, route):
                     ok = True
                     break
+        elif u < p_other + cfg.return_prob:
+            back = [p for p in earlier.get(piece.id, []) if np.hypot(*(p[:2] - old[:2])) > 0.2]
+            if not back:
+                continue
+            kind, returned = "moved", True
+            piece.pose_xytheta = np.asarray(back[int(rng.integers(len(back)))], dtype=float)
+            ok = placement_ok(piece, new.pieces, new, route)
         else:
             continue
         if not ok:
@@ -58,6 +72,8 @@ def rearrange(world: World, route: np.ndarray, cfg: RearrangeConfig, rng: np.ran
             continue
         changes.append({"id": piece.id, "label": piece.label, "kind": kind,
                         "old_pose": _pose(old), "new_pose": _pose(piece.pose_xytheta)})
+        if returned:
+            changes[-1]["returned"] = True
     labels = sorted(SHAPES)
     for _ in range(cfg.add_count):
         piece = Piece(next_id, labels[int(rng.integers(len(labels)))], np.zeros(3))

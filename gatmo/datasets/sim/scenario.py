@@ -163,10 +163,16 @@ def simulate_scenario(out_dir: str | Path, *, preset: str = "hall", runs: int = 
     map_yaml = save_map(rasterize(world, cfg.resolution_m), out / "map.yaml")
     next_id = max((p.id for p in world.pieces), default=0) + 1
     layout0 = [p.as_dict() for p in world.pieces]
+    earlier = {p.id: [p.pose_xytheta.copy()] for p in world.pieces}
     logs, gts, bags, run_docs = [], [], [], []
     for k in range(1, runs + 1):
         r_rearr, r_run = (np.random.default_rng(s) for s in run_ss[k - 1].spawn(2))
-        world, changes, next_id = rearrange(world, route, cfg.rearrange, r_rearr, next_id)
+        world, changes, next_id = rearrange(world, route, cfg.rearrange, r_rearr, next_id,
+                                            earlier)
+        for p in world.pieces:
+            poses = earlier.setdefault(p.id, [])
+            if not any(np.allclose(p.pose_xytheta, q) for q in poses):
+                poses.append(p.pose_xytheta.copy())
         t0 = RUN_T0_S * k
         sim = simulate_run_detailed(world, route, cfg, r_run, t0_s=t0)
         scans = sim.scans
