@@ -125,7 +125,8 @@ def fig_5(rows: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     outs = [o for r in rows for o in r["outcomes"]]
-    scans = sorted(o["scan"] for o in outs if o["outcome"] == "found")
+    # a piece put back where its object already stands is found without a relocation
+    scans = sorted(o["scan"] for o in outs if o["outcome"] == "found" and o["scan"] is not None)
     wrong = sorted(o["scan"] for o in outs if o["outcome"] == "wrong" and o["scan"] is not None)
     n = max(len(outs), 1)
     fig, ax = plt.subplots(figsize=(5, 3.2), constrained_layout=True)
@@ -177,10 +178,10 @@ def main(argv=None) -> int:
     table = table_ii(rows)
     total["table_ii"] = table
     print(json.dumps(total, indent=1))
-    fig_5(rows, OUT / f"fig5_{args.preset}{args.tag}.png")
     OUT.mkdir(exist_ok=True)
     (OUT / f"gatmo_sim_{args.preset}{args.tag}.json").write_text(json.dumps({"rows": rows,
                                                                    "total": total}, indent=1))
+    fig_5(rows, OUT / f"fig5_{args.preset}{args.tag}.png")
     return 0
 
 
