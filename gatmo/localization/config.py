@@ -31,6 +31,13 @@ class AmclConfig(GatmoModel):
     selective_resampling: bool = False
     recovery_alpha_slow: float = Field(0.0, ge=0, le=1)
     recovery_alpha_fast: float = Field(0.0, ge=0, le=1)
+    min_ess_fraction: float = Field(
+        0.0, ge=0, le=1,
+        description="not an AMCL parameter: when one update's weights would leave fewer than "
+        "this fraction of the particles effective (a wide cloud under a sharp sensor model, "
+        "e.g. the first update after an initial pose), the log-likelihoods are tempered "
+        "(scaled by the largest factor <= 1 that keeps it), so the cloud narrows over a few "
+        "updates instead of collapsing onto whichever particle fits best; 0 = off (AMCL)")
     # laser
     laser_model: LaserModel = "likelihood_field"
     beam_ray_caster: RayCaster = Field(

@@ -68,6 +68,7 @@ class LocalizerStats:
     skipped_no_valid_beams: int = 0
     odom_resets: int = 0
     random_injected: int = 0
+    tempered_updates: int = 0
     unmapped_beams: int = 0
     map_region_updates: int = 0
     update_ms: list = field(default_factory=list)
@@ -240,6 +241,11 @@ class MonteCarloLocalizer:
 
     def _weigh_and_resample(self, logw: np.ndarray) -> None:
         c = self.cfg
+        if c.min_ess_fraction > 0:
+            beta = tempering_factor(logw, self.weights, c.min_ess_fraction * len(logw))
+            if beta < 1.0:
+                logw = beta * logw
+                self.stats.tempered_updates += 1
         # weights stay in AMCL's scale for the recovery averages: w = prior * p
         m = float(np.max(logw))
         w = self.weights * np.exp(logw - m)
@@ -291,3 +297,42 @@ class MonteCarloLocalizer:
 
     def _is_converged(self) -> bool:
         return is_converged(self.particles, self.cfg.converged_dist_m)
+
+
+def effective_sample_size(weights: np.ndarray) -> float:
+    """1 / sum(w^2) of the normalized weights (N,)."""
+    w = np.asarray(weights, dtype=float)
+    total = w.sum()
+    if total <= 0 or not np.isfinite(total):
+        return 0.0
+    w = w / total
+    return float(1.0 / np.sum(w**2))
+
+
+def tempering_factor(logw: np.ndarray, prior: np.ndarray, min_ess: float,
+                     iters: int = 30) -> float:
+    """The largest beta in (0, 1] for which the weights ``prior * exp(beta * logw)`` (N,) keep
+    an effective sample size of at least ``min_ess`` (1 if beta = 1 does; bisection). Adaptive
+    likelihood tempering: a sharp sensor model over a wide cloud otherwise leaves a handful of
+    particles, whichever happened to fit best, and the filter cannot recover the truth if none
+    of them was near it."""
+    lw = np.asarray(logw, dtype=float)
+    lw = lw - np.max(lw)
+    prior = np.asarray(prior, dtype=float)
+    if len(prior) != len(lw) or not np.all(np.isfinite(lw)):
+        return 1.0
+
+    def ess(beta: float) -> float:
+        return effective_sample_size(prior * np.exp(beta * lw))
+
+    if ess(1.0) >= min_ess:
+        return 1.0
+    lo, hi = 0.0, 1.0
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        if ess(mid) >= min_ess:
+            lo = mid
+        else:
+            hi = mid
+    return max(lo, 1e-6)
+

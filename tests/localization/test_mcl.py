@@ -166,3 +166,47 @@ def test_bad_params_are_refused_by_name(tmp_path, text, field, line):
     with pytest.raises(ConfigError) as e:
         load_amcl_yaml(p)
     assert e.value.field == field and e.value.line == line and "bad.yaml" in str(e.value)
+
+
+def test_tempering_factor_keeps_the_effective_sample_size():
+    from gatmo.localization.mcl import effective_sample_size, tempering_factor
+
+    rng = np.random.default_rng(0)
+    prior = np.full(1000, 1e-3)
+    # a sharp likelihood over a wide cloud: log-weights spread over hundreds of nats
+    logw = -0.5 * (rng.normal(size=1000) * 100.0) ** 2
+    assert effective_sample_size(prior * np.exp(logw - logw.max())) < 20
+    beta = tempering_factor(logw, prior, 100.0)
+    assert 0 < beta < 1
+    ess = effective_sample_size(prior * np.exp(beta * (logw - logw.max())))
+    assert 100.0 <= ess < 101.0  # the largest beta that keeps 100 effective particles
+    # a flat likelihood needs none
+    assert tempering_factor(np.zeros(1000), prior, 100.0) == 1.0
+    assert effective_sample_size(np.full(10, 0.1)) == pytest.approx(10.0)
+
+
+@pytest.mark.parametrize("min_ess", [0.0, 0.1])
+def test_a_wide_initial_cloud_keeps_particles_alive_with_tempering(office, min_ess):
+    # AMCL's 0.5 m / 15 deg initial cloud under the sharp model: the first update leaves a
+    # handful of effective particles; with min_ess_fraction it keeps a tenth of them
+    grid, scans = office
+    cfg = AmclConfig(**(CFG | dict(laser_model="likelihood_field_prob", sigma_hit_m=0.1,
+                                   min_ess_fraction=min_ess)))
+    loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(0))
+    loc.set_initial_pose(scans[0].gt_pose_xytheta)
+    logw, _ = loc.sensor.weigh(loc.particles, scans[0], False)
+    raw = effective_sample_size_of(logw)
+    loc.update(scans[0].odom_pose_xytheta, scans[0])  # the forced first update
+    assert raw < 0.02 * len(logw)
+    assert loc.stats.tempered_updates == int(min_ess > 0)
+    # the particles the resampling drew from: a handful without tempering, hundreds with it
+    distinct = len(np.unique(loc.particles, axis=0))
+    assert (distinct >= 0.05 * len(logw)) == (min_ess > 0), distinct
+    _, err = _run(loc, scans[1:])
+    assert np.median(err[100:]) < 0.1  # tracking is unchanged once the cloud is tight
+
+
+def effective_sample_size_of(logw):
+    from gatmo.localization.mcl import effective_sample_size
+
+    return effective_sample_size(np.exp(logw - np.max(logw)))
