@@ -12,6 +12,8 @@ Schema (version 1)::
                   "edge_xy": [[x, y], ...],          # E_i, object frame [m]
                   "seen_count": 120, "moved_count": 2,
                   "history": [{"run": 1, "stamp_s": 12.3, "pose": [...], "status": "A"}]}]}
+                  # every pose in history with status U or M, and base_pose, is a prior
+                  # for matching (gatmo.prior_earlier_poses)
 
 Written atomically (temp file, fsync, rename): an interrupted run never leaves half a file.
 """
