@@ -641,7 +641,7 @@ class GatmoMapper:
         for q in o.earlier_poses():
             if o.status != "A" and np.allclose(q, o.pose_xytheta):
                 continue  # where it is placed now is no earlier pose
-            if abs(np.hypot(*(q[:2] - pose_xytheta[:2]))) > o.extent_m() + 0.5:
+            if np.hypot(*(q[:2] - pose_xytheta[:2])) > o.extent_m() + 0.5:
                 continue
             if _footprint_shift_m(o, q, pose_xytheta) <= self.cfg.earlier_pose_tolerance_m:
                 return True
