@@ -45,9 +45,10 @@ def real_log_config(demo_model: bool = False):
     cfg = sim_stack_config()
     a = cfg.amcl
     a.alpha1 = a.alpha2 = a.alpha3 = a.alpha4 = 0.2
-    # AMCL's initial cloud (0.5 m / 15 deg std): the figures in the README were measured so
-    a.initial_cov_xx_m2 = a.initial_cov_yy_m2 = 0.25
-    a.initial_cov_aa_rad2 = (np.pi / 12) ** 2
+    # AMCL's initial cloud (0.5 m / 15 deg std), not the simulator's: the README's figures
+    amcl = type(a)()
+    a.initial_cov_xx_m2, a.initial_cov_yy_m2, a.initial_cov_aa_rad2 = (
+        amcl.initial_cov_xx_m2, amcl.initial_cov_yy_m2, amcl.initial_cov_aa_rad2)
     if not demo_model:
         a.laser_model, a.sigma_hit_m, a.z_hit, a.z_rand = "likelihood_field", 0.2, 0.5, 0.5
     return cfg

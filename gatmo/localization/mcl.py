@@ -335,4 +335,3 @@ def tempering_factor(logw: np.ndarray, prior: np.ndarray, min_ess: float,
         else:
             hi = mid
     return max(lo, 1e-6)
-
