@@ -21,42 +21,10 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from benchmarks._overrides import add_override_args
 
 OUT = Path("bench-out")
-
-
-def observability(scans, piece_old: dict, piece_new: dict | None, res: float = 0.05):
-    """(scans with >= 5 rays through the old footprint, scans with >= 8 returns on the new)."""
-    from gatmo.geometry import compose, transform_points
-    from gatmo.pipeline.evaluate import _piece_points
-
-    told = cKDTree(transform_points(np.array(piece_old["pose"]), _piece_points(piece_old, res)))
-    tnew = None
-    if piece_new is not None:
-        tnew = cKDTree(transform_points(np.array(piece_new["pose"]),
-                                        _piece_points(piece_new, res)))
-    n_old = n_new = 0
-    for s in scans:
-        lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
-        r = s.ranges_m
-        a = lp[2] + s.angles_rad
-        u = np.stack([np.cos(a), np.sin(a)], 1)
-        valid = r < s.range_max_m
-        if tnew is not None:
-            d, _ = tnew.query(lp[:2] + r[valid, None] * u[valid], distance_upper_bound=0.06)
-            n_new += int(np.isfinite(d).sum() >= 8)
-        rr = np.where(valid, r, s.range_max_m) - 0.1
-        ts = np.arange(0.05, s.range_max_m, 0.05)
-        pts = lp[:2][None, None] + ts[None, :, None] * u[:, None, :]
-        m = ts[None, :] < rr[:, None]
-        d, _ = told.query(pts[m], distance_upper_bound=0.03)
-        inside = np.zeros(m.shape, bool)
-        inside[m] = np.isfinite(d)
-        n_old += int(inside.any(axis=1).sum() >= 5)
-    return n_old, n_new
 
 
 def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
@@ -66,7 +34,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
-    from gatmo.pipeline.evaluate import piece_outcome, tie_objects
+    from gatmo.pipeline.evaluate import observed, piece_outcome, tie_objects
     from gatmo.pipeline.runs import load_scans
 
     sim = SimConfig.for_preset("hall")
@@ -94,11 +62,9 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
             if c["kind"] not in ("moved", "shifted") or pid not in p2o:
                 continue
             o = mapper.object_map.by_id[p2o[pid]]
-            n_old, n_new = observability(scans, prev[pid], cur.get(pid))
             rel = [e for e in events if e["object_id"] == o.id and e["kind"] == "relocated"]
             out = piece_outcome(o, pid, doc["map_objects"], run["objects"], events)
-            obs = ("both" if n_old >= 5 and n_new >= 5 else "new" if n_new >= 5
-                   else "old" if n_old >= 5 else "none")
+            obs = observed(scans, prev[pid], cur.get(pid))
             rows.append({"seed": seed, "run": k + 1, "label": c["label"], "kind": c["kind"],
                          "returned": bool(c.get("returned")), "observed": obs, "outcome": out,
                          "scans_to_match": rel[-1]["support_scans"] if rel else None})

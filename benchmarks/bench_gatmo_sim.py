@@ -83,14 +83,20 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     """Per moved piece and run (paper, Table II / Fig. 5): label, outcome (found: right
     object at the true pose; twin: its object at the true pose of an identical piece (the map
     is right, the identity swapped); wrong: its object relocated elsewhere; absent: noticed
-    gone, not found; missed), and for relocations the scan index at which it happened."""
+    gone, not found; missed), whether the robot could have found it (``observed``: both its
+    old place seen through and its new place seen, from the true poses: "both", "old", "new",
+    "none"), and for relocations the scan index at which it happened."""
     from gatmo.maps.object_io import load_objects
-    from gatmo.pipeline.evaluate import piece_outcome, tie_objects
+    from gatmo.pipeline.evaluate import observed, piece_outcome, tie_objects
+    from gatmo.pipeline.runs import load_scans
 
     doc = json.loads(Path(scen.scenario_json).read_text())
     folders = sorted((cmp_dir / "gatmo").glob("*"))
     out = []
+    prev = {p["id"]: p for p in doc["map_objects"]}
     for k, run in enumerate(doc["runs"]):
+        scans = load_scans(scen.logs[k])
+        cur = {p["id"]: p for p in run["objects"]}
         om = load_objects(folders[k] / "objects.json")
         ties = tie_objects(om, doc)
         p2o = {v: o for o, v in ties.items()}
@@ -102,7 +108,9 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
             rel = [e for e in events if e["kind"] == "relocated" and e["object_id"] == o.id]
             kind = piece_outcome(o, c["id"], doc["map_objects"], run["objects"], events)
             out.append({"run": k + 1, "label": c["label"], "outcome": kind,
+                        "observed": observed(scans, prev[c["id"]], cur.get(c["id"])),
                         "scan": rel[-1]["scan_index"] if rel else None})
+        prev = cur
     return out
 
 
@@ -175,6 +183,11 @@ def main(argv=None) -> int:
         "gatmo_ms_per_scan": float(a["gatmo_ms_per_scan"].mean()),
         "static_ms_per_scan": float(a["static_ms_per_scan"].mean()),
     }
+    both = [o for r in rows for o in r["outcomes"] if o["observed"] == "both"]
+    total["seen_both_over_moved"] = len(both) / max(a["moved"].sum(), 1)
+    total["found_over_seen_both"] = sum(o["outcome"] == "found" for o in both) / max(len(both), 1)
+    total["found_or_twin_over_seen_both"] = sum(o["outcome"] in ("found", "twin")
+                                                for o in both) / max(len(both), 1)
     table = table_ii(rows)
     total["table_ii"] = table
     print(json.dumps(total, indent=1))

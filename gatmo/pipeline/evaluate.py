@@ -196,3 +196,44 @@ def piece_outcome(o, piece_id: int, layout0: list[dict], layout: list[dict],
         return "twin"
     kinds = {e["kind"] for e in events if e.get("object_id") == o.id}
     return "wrong" if "relocated" in kinds else "absent" if "absent" in kinds else "missed"
+
+
+def observability(scans, piece_old: dict, piece_new: dict | None,
+                  res: float = 0.05) -> tuple[int, int]:
+    """How well a run saw a piece that moved, from the simulator's truth: (scans with >= 5
+    rays through its old footprint, scans with >= 8 returns on its new one). ``scans``: the
+    run's scans with ground-truth poses; pieces as in scenario.json (``piece_new`` None: it
+    was removed)."""
+    told = cKDTree(transform_points(np.array(piece_old["pose"]), _piece_points(piece_old, res)))
+    tnew = None
+    if piece_new is not None:
+        tnew = cKDTree(transform_points(np.array(piece_new["pose"]),
+                                        _piece_points(piece_new, res)))
+    n_old = n_new = 0
+    for s in scans:
+        lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
+        r = s.ranges_m
+        a = lp[2] + s.angles_rad
+        u = np.stack([np.cos(a), np.sin(a)], 1)
+        valid = r < s.range_max_m
+        if tnew is not None:
+            d, _ = tnew.query(lp[:2] + r[valid, None] * u[valid], distance_upper_bound=0.06)
+            n_new += int(np.isfinite(d).sum() >= 8)
+        rr = np.where(valid, r, s.range_max_m) - 0.1
+        ts = np.arange(0.05, s.range_max_m, 0.05)
+        pts = lp[:2][None, None] + ts[None, :, None] * u[:, None, :]
+        m = ts[None, :] < rr[:, None]
+        d, _ = told.query(pts[m], distance_upper_bound=0.03)
+        inside = np.zeros(m.shape, bool)
+        inside[m] = np.isfinite(d)
+        n_old += int(inside.any(axis=1).sum() >= 5)
+    return n_old, n_new
+
+
+def observed(scans, piece_old: dict, piece_new: dict | None, min_scans: int = 5) -> str:
+    """"both" (old place seen through and new place seen, each in ``min_scans`` scans), "old",
+    "new" or "none": whether GATMO could have found the piece in this run at all."""
+    n_old, n_new = observability(scans, piece_old, piece_new)
+    if n_old >= min_scans and n_new >= min_scans:
+        return "both"
+    return "new" if n_new >= min_scans else "old" if n_old >= min_scans else "none"

@@ -3,7 +3,8 @@
 import numpy as np
 
 from gatmo.objects.objectmap import MapObject
-from gatmo.pipeline.evaluate import expected_pose, placement_error, twin_of
+from gatmo.pipeline.evaluate import expected_pose, observed, placement_error, twin_of
+from tests.helpers import make_scan, room_grid
 
 
 def _box_object(pose, label="box"):
@@ -77,3 +78,22 @@ def test_score_run_tells_twin_swaps_from_false_relocations():
     r = score_run(om, {1: 7}, scen, 1, events)
     assert (r["false_relocations"], r["twin_relocations"]) == (1, 2)
     assert r["found"] == 1  # it ends the run at its own piece's true pose
+
+
+def test_observed_tells_whether_the_old_place_was_seen_through_and_the_new_one_seen():
+    # the box stood at (3, 4) and now stands at (5.5, 4); the robot at (1, 4) looks along +x
+    old, new = _piece(1, (3.0, 4.0, 0.0)), _piece(1, (5.5, 4.0, 0.0))
+    world = room_grid(10.0, 8.0, boxes=[(5.25, 3.75, 5.75, 4.25)])
+    scans = [make_scan(world, (1.0, 4.0, 0.0), n_beams=361, max_range_m=8.0)
+             for _ in range(5)]
+    assert observed(scans, old, new) == "both"
+    assert observed(scans[:4], old, new) == "none"  # 5 scans needed
+    # facing away: its old place behind the laser, the new one not in view
+    away = [make_scan(world, (1.0, 4.0, np.pi), n_beams=361, max_range_m=8.0)
+            for _ in range(5)]
+    assert observed(away, old, new) == "none"
+    # with a 4 m laser the new place (4.25 m off) is out of reach: only the old one is seen
+    short = [make_scan(world, (1.0, 4.0, 0.0), n_beams=361, max_range_m=4.0)
+             for _ in range(5)]
+    assert observed(short, old, new) == "old"
+    assert observed(scans, old, None) == "old"  # removed
