@@ -40,8 +40,10 @@ class FusionConfig(GatmoModel):
     the object map only under the stricter ``absence_max_std_*`` (or within ``confident_for_m``
     of travel after a reset): a wrong pose sees through everything. When the localizer's pose
     jumps against odometry by more than ``max_offset_jump_m`` (recovery injected particles, a
-    kidnapping), GATMO waits ``settle_after_jump_m`` of travel: a filter that has just locked
-    onto a look-alike place is as confident as one that is right.
+    kidnapping), or AMCL's recovery injects random particles at all (it suspects it is lost; the
+    cloud may then drift to a look-alike place without a jump), GATMO waits
+    ``settle_after_jump_m`` of travel: a filter that has just locked onto a look-alike place is
+    as confident as one that is right.
 
     ``align_to_map``: GATMO's pose is the published one refined by ICP against the current map.
     An alignment that converges with most points matched but moves the pose by more than
@@ -200,6 +202,7 @@ class LocalizationStack:
         self._last_loc: np.ndarray | None = None
         self._last_odom: np.ndarray | None = None
         self._settle_left_m = 0.0
+        self._injected_seen = 0  # the localizer's random particles counted so far
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -225,6 +228,12 @@ class LocalizationStack:
             jump = relative(compose(self._last_loc, d_odom), loc_pose)
             if np.hypot(jump[0], jump[1]) > self.fusion.max_offset_jump_m:
                 self._settle_left_m = self.fusion.settle_after_jump_m
+        # AMCL's recovery injected random particles: the scans fit the filter's own cloud
+        # poorly, so it suspects it is lost, and whatever it settles on next is a guess
+        injected = getattr(getattr(self.localizer, "stats", None), "random_injected", 0)
+        if injected > self._injected_seen:
+            self._settle_left_m = self.fusion.settle_after_jump_m
+        self._injected_seen = injected
         self._last_loc, self._last_odom = loc_pose, odom
         reset = False
         pose = loc_pose

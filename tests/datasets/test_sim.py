@@ -59,8 +59,13 @@ def test_rasterize_fills_pieces_and_marks_outside_unknown():
     assert g.value_at(np.array([[2.65, 2.3]]))[0] == OCCUPIED  # desk is 1.4 x 0.7
     assert g.value_at(np.array([[2.0, 2.45]]))[0] == FREE
     assert g.value_at(np.array([[-0.5, 2.0]]))[0] == -1
+    # every cell the desk overlaps is occupied, as a map built from scans has it: the edge
+    # cells' centres lie on its surfaces (not half a cell inside)
     area = g.occupied.sum() * 0.05**2
-    assert area == pytest.approx(1.4 * 0.7, rel=0.05)
+    assert area == pytest.approx((1.4 + 0.05) * (0.7 + 0.05), rel=0.02)
+    xy = g.occupied_cells_world()
+    assert xy.min(axis=0) == pytest.approx([1.3, 1.65], abs=1e-6)
+    assert xy.max(axis=0) == pytest.approx([2.7, 2.35], abs=1e-6)
 
 
 @pytest.mark.parametrize("preset", ["hall", "office"])

@@ -54,23 +54,25 @@ def test_kidnapped_robot_recovers(office):
     grid, scans = office
     cfg = AmclConfig(**(CFG | dict(recovery_alpha_slow=0.001, recovery_alpha_fast=0.1,
                                    max_particles=10000)))
-    # recovery is a matter of chance here: 25 of seeds 0-39 find the robot within the 200 scans
-    # (26 of 40 before the particle-set kernels changed how the random numbers are drawn)
-    loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(0))
-    loc.set_initial_pose(scans[0].gt_pose_xytheta)
-    _run(loc, scans[:60])
     # kidnap: from scan 60 on the scans come from where the robot was at scan 200 and later,
     # while odometry continues smoothly from scan 59
     o59, o200 = scans[59].odom_pose_xytheta, scans[200].odom_pose_xytheta
-    errs = []
-    for s in scans[200:]:
-        e = loc.update(compose(o59, relative(o200, s.odom_pose_xytheta)), s)
-        errs.append(np.hypot(*(e.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
     assert np.hypot(*(scans[200].gt_pose_xytheta[:2] - scans[59].gt_pose_xytheta[:2])) > 1.0
-    assert loc.stats.random_injected > 0
-    # the injected particles find the robot again within the 200 scans (it may be lost again
-    # in this office of look-alike rooms: recovery is not a guarantee of staying found)
-    assert errs[0] > 1.0 and np.min(errs) < 0.3
+    # recovery is a matter of chance, so it is a rate over seeds: 10 of seeds 0-15 find the
+    # robot within the 200 scans (it may be lost again in this office of look-alike rooms:
+    # recovery is not a guarantee of staying found); without recovery none would
+    found = 0
+    for seed in range(16):
+        loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(seed))
+        loc.set_initial_pose(scans[0].gt_pose_xytheta)
+        _run(loc, scans[:60])
+        errs = []
+        for s in scans[200:]:
+            e = loc.update(compose(o59, relative(o200, s.odom_pose_xytheta)), s)
+            errs.append(np.hypot(*(e.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
+        assert errs[0] > 1.0 and loc.stats.random_injected > 0
+        found += int(np.min(errs) < 0.3)
+    assert found >= 8
 
 
 def test_no_valid_beams_leaves_filter_unchanged(office):
