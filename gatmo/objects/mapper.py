@@ -456,7 +456,14 @@ class GatmoMapper:
         ok = hit & g.in_bounds(cells)
         own = np.full(len(r), -1)
         own[ok] = self._owner[cells[ok, 1], cells[ok, 0]]
-        through = ok & (r > expected + c.absence_beyond_m)
+        # a beam passes through an object only if the map has the object a cell deeper along
+        # it too: one that clips an edge cell (which holds the surface and some free space
+        # beside it, as in any map built from scans) passes the object, not through it
+        deeper = g.world_to_cell(ends + g.resolution_m * u)
+        inside = g.in_bounds(deeper)
+        own_deeper = np.full(len(r), -2)
+        own_deeper[inside] = self._owner[deeper[inside, 1], deeper[inside, 0]]
+        through = ok & (r > expected + c.absence_beyond_m) & (own_deeper == own)
         on = ok & (np.abs(r - expected) <= c.hit_tolerance_m)
         # beyond absence_max_range_m a heading error of a degree moves a beam by more than a
         # small object's width: such beams are no evidence for or against an object
@@ -786,7 +793,9 @@ class GatmoMapper:
         crossed this run (seen free), or a partial view (one straight side) could put it
         anywhere along that side."""
         g = self._grid
-        c = g.world_to_cell(o.cells_world(mt.pose_xytheta))
+        # only the object's inner cells: its edge cells hold its surface, so part of each is
+        # free space that rays passing close beside it cross (as in any map built from scans)
+        c = g.world_to_cell(transform_points(mt.pose_xytheta, _inner_cells(o)))
         ok = g.in_bounds(c)
         if not ok.any():
             return False
@@ -883,3 +892,14 @@ class GatmoMapper:
         d["metaobjects"] = len(self._meta)
         d["ms_per_update"] = float(np.median(self._ms)) if self._ms else float("nan")
         return d
+
+
+def _inner_cells(o: MapObject) -> np.ndarray:
+    """(K, 2) the object's cells that are not edge cells, in its frame; all of them for an
+    object that is mostly edge (small or thin: its few inner cells would let a match slide)."""
+    if len(o.edge_xy) == 0:
+        return o.shape_xy
+    key = np.round(o.shape_xy / o.resolution_m).astype(np.int64)
+    edge = {tuple(k) for k in np.round(o.edge_xy / o.resolution_m).astype(np.int64)}
+    inner = np.array([tuple(k) not in edge for k in key], dtype=bool)
+    return o.shape_xy[inner] if inner.sum() >= 0.5 * len(key) else o.shape_xy

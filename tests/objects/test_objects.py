@@ -519,3 +519,58 @@ def test_an_object_seen_where_it_stood_before_is_put_back(prior, earlier_offset,
     if relocated:
         np.testing.assert_allclose(box.pose_xytheta[:2], home[:2] + [5.0, 0.0], atol=0.06)
         assert len(box.earlier_poses()) == 3  # the map's pose, east, west; east again is no new
+
+
+def _drive_past(label):
+    """(mapper, its one piece) after 80 scans driving past a ``label`` piece that stands where
+    the map has it, the map drawn as a map built from scans has it (rasterize)."""
+    from gatmo.datasets.sim.presets import _rect, _walls_of
+    from gatmo.datasets.sim.world import Piece, World, cast, rasterize
+    from gatmo.datasets.types import Scan
+
+    world = World((-0.5, -0.5, 10.5, 6.5), [_rect(0, 0, 10, 6)], _walls_of(0, 0, 10, 6),
+                  [Piece(1, label, np.array([5.03, 3.02, 0.3]))])
+    segs, circles = world.segments_and_circles()
+    m = GatmoMapper.from_config(CFG, rasterize(world, 0.05))
+    m.begin_run(1)
+    piece = [o for o in m.object_map.objects if not o.structure][0]
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 361)
+    for i, x in enumerate(np.linspace(1.0, 9.0, 80)):
+        pose = np.array([x, 1.8, 0.0 if x < 5 else np.pi / 2])
+        r = cast(pose[:2], pose[2] + angles, segs, circles, 4.0)
+        scan = Scan(stamp_s=0.1 * i, ranges_m=r, angles_rad=angles, range_min_m=0.02,
+                    range_max_m=4.0, odom_pose_xytheta=pose, laser_pose_xytheta=np.zeros(3),
+                    gt_pose_xytheta=pose)
+        assert m.update(pose, scan, pose_confident=True, stamp_s=0.1 * i) == []
+    return m, piece
+
+
+SMALL_PIECES = ("trash_can", "footstool", "box", "round_table")
+
+
+def test_beams_passing_close_beside_a_standing_piece_do_not_count_as_through_it():
+    """A map built from scans draws a piece a fraction of a cell larger than it is (its edge
+    cells hold its surface and some free space beside it), so beams that pass close beside it
+    end beyond where the map says they would. Passing through needs the map's object a cell
+    deeper along the beam too. Nothing moved here: the beams through each piece must be few
+    and no piece may fall in doubt. Measured: 3.1 % of the four pieces' beams through with
+    the rule, 7.2 % without."""
+    through = total = 0
+    for label in SMALL_PIECES:
+        m, piece = _drive_past(label)
+        assert piece.id not in m._doubt, label
+        through += m._through[piece.id]
+        total += m._through[piece.id] + m._hits[piece.id]
+    assert through < 0.045 * total
+
+
+@pytest.mark.parametrize("label", SMALL_PIECES)
+def test_a_piece_where_it_stands_is_not_refused_for_free_space_at_its_edges(label):
+    """The same edge cells are crossed by rays passing close beside the piece: counting them,
+    11-27 % of these pieces' cells were seen free (more than match_max_free_fraction, 5 %),
+    and a chair matching the piece where it stands would be refused. Only the inner cells
+    count: 0-3 %."""
+    from types import SimpleNamespace
+
+    m, piece = _drive_past(label)
+    assert m._free_consistent(piece, SimpleNamespace(pose_xytheta=piece.pose_xytheta))
