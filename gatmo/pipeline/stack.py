@@ -54,7 +54,12 @@ class FusionConfig(GatmoModel):
     beam-agreement tests still apply), ``skip`` skips the scan (GATMO then saw 20 of 600 scans
     of a simulated rearranged hall). GATMO is told which poses the alignment confirmed
     (``pose_verified``): new objects need scans from such poses
-    (``gatmo.gamma_min_verified_scans``).
+    (``gatmo.gamma_min_verified_scans``). ``verified_suffices`` (off): a scan the filter is not
+    strictly confident on (between its updates, or its cloud 0.1-0.15 m wide) still goes to
+    GATMO when the alignment confirms the pose. Held-out hall seeds 200-209: the full stack's
+    median ATE ratio to the static localizer 0.36 instead of 0.89 and time lost 4.7 % instead
+    of 10.2 %, but false relocations 1.25 per run instead of 0.53 and moved pieces found 9.4 %
+    instead of 11.7 %: GATMO needs a pose better than the alignment's check guarantees.
 
     ``mask_unexplained``: returns that land, seen from the pose odometry predicts, where GATMO
     found this run's returns unexplained by the current map (furniture it has not placed yet,
@@ -84,6 +89,7 @@ class FusionConfig(GatmoModel):
     align_max_correction_m: float = 0.15
     align_max_correction_deg: float = 5.0
     align_inconclusive: Literal["filter_pose", "skip"] = "filter_pose"
+    verified_suffices: bool = False
     mask_unexplained: bool = True
 
 
@@ -157,10 +163,12 @@ class StackStep:
     ms: float = 0.0
 
 
-def is_confident(estimate, fusion: FusionConfig, *, strict: bool = False) -> bool:
+def is_confident(estimate, fusion: FusionConfig, *, strict: bool = False,
+                 require_update: bool = True) -> bool:
     """The paper's reset test on the particle covariance (Sec. IV-B); ``strict`` applies the
-    tighter thresholds GATMO's absence test needs."""
-    if not getattr(estimate, "updated", True):
+    tighter thresholds GATMO's absence test needs; ``require_update``: only on a scan the
+    filter weighed (otherwise its last covariance counts)."""
+    if require_update and not getattr(estimate, "updated", True):
         return False
     cov = np.asarray(estimate.cov, dtype=float)
     if not np.all(np.isfinite(cov)):
@@ -286,12 +294,20 @@ class LocalizationStack:
             pose_ok = pose_ok and self._settle_left_m <= 0.0
             map_pose = pose
             verified = pose_ok
+            if self.fusion.align_to_map and self._aligner is None:
+                self._aligner = MapAligner(self.fusion)
+                self._aligner.set_grid(self.mapper.grid())
             if pose_ok and self.fusion.align_to_map:
-                if self._aligner is None:
-                    self._aligner = MapAligner(self.fusion)
-                    self._aligner.set_grid(self.mapper.grid())
                 map_pose, pose_ok = self._aligner.refine(pose, scan)
                 verified = self._aligner.last_verified
+            elif (self.fusion.verified_suffices and self.fusion.align_to_map
+                  and self._settle_left_m <= 0.0
+                  and is_confident(est, self.fusion, require_update=False)):
+                # between the filter's strictly confident updates: the scan-to-map alignment
+                # alone vouches for the pose
+                refined, _ = self._aligner.refine(pose, scan)
+                if self._aligner.last_verified:
+                    map_pose, pose_ok, verified = refined, True, True
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
                                         stamp_s=scan.stamp_s, pose_verified=verified)
             for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
