@@ -219,6 +219,8 @@ class LocalizationStack:
         self._last_pose = None
         self._last_loc = self._last_odom = None
         self._settle_left_m = 0.0
+        self._injected_seen = getattr(getattr(self.localizer, "stats", None),
+                                      "random_injected", 0)
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
