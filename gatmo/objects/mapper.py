@@ -109,6 +109,7 @@ class GatmoMapper:
         # near nothing): what the absence veto looks at
         self._near_returns = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._fields: dict[int, EdgeField] = {}
+        self._inner: dict[int, np.ndarray] = {}  # per object id: _inner_cells, its frame
         self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
@@ -795,7 +796,10 @@ class GatmoMapper:
         g = self._grid
         # only the object's inner cells: its edge cells hold its surface, so part of each is
         # free space that rays passing close beside it cross (as in any map built from scans)
-        c = g.world_to_cell(transform_points(mt.pose_xytheta, _inner_cells(o)))
+        inner = self._inner.get(o.id)
+        if inner is None:
+            inner = self._inner[o.id] = _inner_cells(o)
+        c = g.world_to_cell(transform_points(mt.pose_xytheta, inner))
         ok = g.in_bounds(c)
         if not ok.any():
             return False
@@ -863,6 +867,7 @@ class GatmoMapper:
             same.shape_xy, same.edge_xy, same.pose_xytheta = shape, edge, pose
             same.seen_count += 1
             self._fields.pop(same.id, None)
+            self._inner.pop(same.id, None)
             self._cores.pop(same.id, None)
             return
         shape, edge, pose = shape_from_points(pts, self._grid.resolution_m)
@@ -900,6 +905,6 @@ def _inner_cells(o: MapObject) -> np.ndarray:
     if len(o.edge_xy) == 0:
         return o.shape_xy
     key = np.round(o.shape_xy / o.resolution_m).astype(np.int64)
-    edge = {tuple(k) for k in np.round(o.edge_xy / o.resolution_m).astype(np.int64)}
-    inner = np.array([tuple(k) not in edge for k in key], dtype=bool)
+    edge = np.round(o.edge_xy / o.resolution_m).astype(np.int64)
+    inner = ~(key[:, None, :] == edge[None, :, :]).all(axis=2).any(axis=1)
     return o.shape_xy[inner] if inner.sum() >= 0.5 * len(key) else o.shape_xy

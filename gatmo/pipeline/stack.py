@@ -163,6 +163,12 @@ class StackStep:
     ms: float = 0.0
 
 
+def _injected(localizer) -> int:
+    """Random particles the localizer has injected so far (AMCL's recovery; 0 if it does not
+    count them)."""
+    return getattr(getattr(localizer, "stats", None), "random_injected", 0)
+
+
 def is_confident(estimate, fusion: FusionConfig, *, strict: bool = False,
                  require_update: bool = True) -> bool:
     """The paper's reset test on the particle covariance (Sec. IV-B); ``strict`` applies the
@@ -219,8 +225,7 @@ class LocalizationStack:
         self._last_pose = None
         self._last_loc = self._last_odom = None
         self._settle_left_m = 0.0
-        self._injected_seen = getattr(getattr(self.localizer, "stats", None),
-                                      "random_injected", 0)
+        self._injected_seen = _injected(self.localizer)
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
@@ -240,7 +245,7 @@ class LocalizationStack:
                 self._settle_left_m = self.fusion.settle_after_jump_m
         # AMCL's recovery injected random particles: the scans fit the filter's own cloud
         # poorly, so it suspects it is lost, and whatever it settles on next is a guess
-        injected = getattr(getattr(self.localizer, "stats", None), "random_injected", 0)
+        injected = _injected(self.localizer)
         if injected > self._injected_seen:
             self._settle_left_m = self.fusion.settle_after_jump_m
         self._injected_seen = injected
