@@ -5,6 +5,11 @@ the localizer's.
 
     python -m benchmarks.bench_gatmo_oracle [--seeds 5] [--first-seed 100] [--procs 2]
         [--return-prob 0.3 --runs 6] [--set gatmo.prior_earlier_poses=false --tag _noprior]
+        [--pose-noise 0.03,1.0]
+
+``--pose-noise XY_M,YAW_DEG``: the true poses with an error added, slowly varying as a
+filter's is (per axis a first-order autoregressive series, correlation 0.95 from scan to scan,
+of that standard deviation): how much pose error GATMO tolerates.
 
 Outcomes: found (right object, true pose), twin (at an identical piece's true pose: the map is
 right, the identity swapped), wrong (relocated elsewhere), absent (noticed gone, not found),
@@ -27,8 +32,22 @@ from benchmarks._overrides import add_override_args
 OUT = Path("bench-out")
 
 
+def pose_errors(n: int, std_xy_m: float, std_yaw_deg: float, rng: np.random.Generator,
+                rho: float = 0.95) -> np.ndarray:
+    """(n, 3) pose errors: per axis an AR(1) series with correlation ``rho`` per step and
+    stationary standard deviations (std_xy_m, std_xy_m, std_yaw_deg in radians)."""
+    std = np.array([std_xy_m, std_xy_m, np.radians(std_yaw_deg)])
+    out = np.empty((n, 3))
+    e = rng.normal(0.0, std)
+    for i in range(n):
+        out[i] = e
+        e = rho * e + np.sqrt(1.0 - rho**2) * rng.normal(0.0, std)
+    return out
+
+
 def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
-             overrides: list[str] | None = None) -> list[dict]:
+             overrides: list[str] | None = None,
+             pose_noise: tuple[float, float] | None = None) -> list[dict]:
     from benchmarks._overrides import with_overrides
     from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.maps.io import load_map
@@ -46,12 +65,15 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
     p2o = {v: k for k, v in tie_objects(mapper.object_map, doc).items()}
     prev = {p["id"]: p for p in doc["map_objects"]}
     rows = []
+    noise_rng = np.random.default_rng([seed, 7])
     for k, log in enumerate(scen.logs):
         scans = load_scans(log)
         mapper.begin_run(k + 1)
         events = []
+        err = (np.zeros((len(scans), 3)) if pose_noise is None else
+               pose_errors(len(scans), *pose_noise, noise_rng))
         for i, s in enumerate(scans):
-            for e in mapper.update(s.gt_pose_xytheta, s, pose_confident=True,
+            for e in mapper.update(s.gt_pose_xytheta + err[i], s, pose_confident=True,
                                    stamp_s=s.stamp_s):
                 events.append(dict(e.as_dict(), scan=i))
         events += [dict(e.as_dict(), scan=len(scans)) for e in mapper.end_run()]
@@ -80,13 +102,17 @@ def main(argv=None) -> int:
     ap.add_argument("--return-prob", type=float, default=0.0,
                     help="per piece and run, the chance it is put back where it stood before")
     ap.add_argument("--procs", type=int, default=1, help="seeds run in parallel")
+    ap.add_argument("--pose-noise", default=None, metavar="XY_M,YAW_DEG",
+                    help="add a slowly varying error of these standard deviations to the poses")
     add_override_args(ap)
     args = ap.parse_args(argv or [])
     rows: list[dict] = []
     seeds = range(args.first_seed, args.first_seed + args.seeds)
+    noise = None if args.pose_noise is None else tuple(
+        float(x) for x in args.pose_noise.split(","))
     with tempfile.TemporaryDirectory() as tmp:
         job = partial(one_seed, runs=args.runs, tmp=Path(tmp), return_prob=args.return_prob,
-                      overrides=args.set)
+                      overrides=args.set, pose_noise=noise)
         with ProcessPoolExecutor(args.procs) as ex:
             for seed, r in zip(seeds, ex.map(job, seeds), strict=True):
                 rows += r
@@ -101,7 +127,7 @@ def main(argv=None) -> int:
     n_both = max(sum(both.values()), 1)
     scans = [r["scans_to_match"] for r in rows if r["outcome"] == "found"
              and r["scans_to_match"] is not None]
-    total = {"seeds": args.seeds, "by_observability": table,
+    total = {"seeds": args.seeds, "pose_noise": noise, "by_observability": table,
              "found_of_seen_both": both.get("found", 0) / n_both,
              "found_or_twin_of_seen_both": (both.get("found", 0) + both.get("twin", 0)) / n_both,
              "wrong_per_run": sum(d["wrong"] for d in table.values()) / (args.seeds * args.runs),

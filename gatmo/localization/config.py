@@ -80,6 +80,22 @@ class AmclConfig(GatmoModel):
             "the particles move by odometry alone)"
         ),
     )
+    min_explained_beam_fraction: float = Field(
+        0.0, ge=0, le=1,
+        description=(
+            "likelihood_field_prob (not an AMCL parameter): once the filter has converged, a "
+            "scan of which fewer than this fraction of the beams are explained by the map (the "
+            "hit term of a beam's likelihood above its random term, for the best tenth of the "
+            "particles) is not weighed: the particles coast on odometry. Where the furniture "
+            "in view has all moved, weighing such a scan pulls the particles onto whatever "
+            "alignment of old and new furniture exists. For at most max_coast_m of travel: "
+            "beyond it scans are weighed again as AMCL does (a lost filter sees unexplained "
+            "scans too, and must be able to recover). 0: off (AMCL)"
+        ),
+    )
+    max_coast_m: float = Field(
+        3.0, gt=0, description="longest odometry-only stretch min_explained_beam_fraction allows"
+    )
     do_beamskip: bool = False
     beam_skip_distance_m: float = Field(0.5, gt=0)
     beam_skip_threshold: float = Field(0.3, ge=0, le=1)

@@ -70,6 +70,7 @@ class LocalizerStats:
     random_injected: int = 0
     tempered_updates: int = 0
     unmapped_beams: int = 0
+    unexplained_skipped: int = 0  # scans held back by min_explained_beam_fraction
     map_region_updates: int = 0
     update_ms: list = field(default_factory=list)
 
@@ -79,6 +80,7 @@ class LocalizerStats:
                 "skipped_no_valid_beams": self.skipped_no_valid_beams,
                 "odom_resets": self.odom_resets, "random_injected": self.random_injected,
                 "unmapped_beams": self.unmapped_beams,
+                "unexplained_skipped": self.unexplained_skipped,
                 "map_region_updates": self.map_region_updates,
                 "ms_per_update_median": float(np.median(ms))}
 
@@ -106,6 +108,7 @@ class MonteCarloLocalizer:
         self._converged = False
         self._updates_since_resample = 0
         self._force_update = True
+        self._coast_m = 0.0  # odometry-only travel on unexplained scans (max_coast_m)
         if cfg.initial_pose_xytheta is not None:
             self.set_initial_pose(np.array(cfg.initial_pose_xytheta), self.initial_cov())
         elif cfg.global_localization_on_start:
@@ -160,6 +163,7 @@ class MonteCarloLocalizer:
         self.w_slow = self.w_fast = 0.0
         self._converged = False
         self._force_update = True
+        self._coast_m = 0.0
 
     def _free_cells(self) -> np.ndarray:
         if self._free_xy is None:
@@ -216,8 +220,17 @@ class MonteCarloLocalizer:
             t0 = time.perf_counter()
             moved = sample_motion(self.particles, self._odom_at_update, odom, c.odom_model,
                                   (c.alpha1, c.alpha2, c.alpha3, c.alpha4, c.alpha5), self.rng)
-            logw, n_beams = self.sensor.weigh(moved, scan, self._converged)
+            # the gate holds from a converged filter on, while it coasts (its cloud spreads on
+            # odometry alone), up to max_coast_m
+            gate = (self._converged or self._coast_m > 0.0) and self._coast_m < c.max_coast_m
+            logw, n_beams = self.sensor.weigh(moved, scan, self._converged,
+                                              gate_unexplained=gate)
             self.stats.unmapped_beams += getattr(self.sensor, "last_unmapped_beams", 0)
+            if getattr(self.sensor, "last_gated", False):
+                self.stats.unexplained_skipped += 1
+                self._coast_m += float(np.hypot(delta[0], delta[1]))
+            elif n_beams > 0:
+                self._coast_m = 0.0
             self.particles = moved
             self._odom_at_update = odom.copy()
             if n_beams == 0:

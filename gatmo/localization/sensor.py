@@ -119,6 +119,8 @@ class SensorModel:
         self.cfg = cfg
         self.ray_caster = ray_caster
         self.last_unmapped_beams = 0
+        self.last_gated = False
+        self.last_explained_fraction = float("nan")
         self._unmapped = None
         self._unmapped_key = None
         self._table = None
@@ -265,8 +267,12 @@ class SensorModel:
         return kern(parts, lp, ranges, ca, sa, short, const, self._march_table(),
                     g.resolution_m, ox, oy, c.z_hit, c.sigma_hit_m, rmax, MARCH_JUMP_MIN_CELLS)
 
-    def weigh(self, particles: np.ndarray, scan: Scan, converged: bool) -> tuple[np.ndarray, int]:
-        """Log weights (N,) and the number of beams used (0: nothing to weigh)."""
+    def weigh(self, particles: np.ndarray, scan: Scan, converged: bool,
+              gate_unexplained: bool = False) -> tuple[np.ndarray, int]:
+        """Log weights (N,) and the number of beams used (0: nothing to weigh).
+        ``gate_unexplained``: apply ``min_explained_beam_fraction`` (the localizer asks for it
+        once converged, and for at most ``max_coast_m`` of travel; ``last_gated`` says whether
+        it held the scan back; ``last_explained_fraction`` is the fraction measured)."""
         from gatmo.localization import _kernels as K
 
         c = self.cfg
@@ -274,6 +280,7 @@ class SensorModel:
         ranges, angles, rmax = select_beams(scan, c.max_beams, c.laser_min_range_m,
                                             c.laser_max_range_m, keep_max_range=beam)
         self.last_unmapped_beams = 0
+        self.last_gated = False
         if len(ranges) == 0:
             return np.zeros(len(particles)), 0
         g = self.field.grid
@@ -301,6 +308,16 @@ class SensorModel:
                                                   g.resolution_m, ox, oy,
                                                   self.field.max_dist_m, c.z_hit, c.z_rand,
                                                   c.sigma_hit_m, rmax, use)
+        # A beam is explained where its hit term outweighs its random term,
+        # z_hit exp(-d^2 / 2 sigma^2) > z_rand / range_max; the fraction per particle, then
+        # for the best tenth of them: a cloud spread by coasting is not unexplained because
+        # most of its particles are off
+        ratio = c.z_hit * rmax / max(c.z_rand, 1e-12)
+        d_max = c.sigma_hit_m * np.sqrt(2.0 * np.log(ratio)) if ratio > 1.0 else 0.0
+        self.last_explained_fraction = float(np.quantile((zs < d_max).mean(axis=1), 0.9))
+        if gate_unexplained and self.last_explained_fraction < c.min_explained_beam_fraction:
+            self.last_gated = True
+            return np.zeros(len(particles)), 0
         if c.do_beamskip and converged:
             # AMCL: skip beams that most particles cannot explain (likely unmapped obstacles),
             # unless that would skip too many of them

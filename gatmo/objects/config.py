@@ -75,6 +75,10 @@ class GatmoConfig(GatmoModel):
     chair_min_scans: int = Field(6, ge=1)
     chair_min_cells: int = Field(6, ge=1)
     chair_max_speed_mps: float = Field(0.15, gt=0)
+    chair_align_cells: int = Field(
+        0, ge=0, description="beyond the paper: each new observation is shifted by up to this "
+        "many cells (per axis) onto the chair's evidence before it is added, so that a pose "
+        "error of a few cm from scan to scan does not smear the grid; 0: off")
     # matching
     match_min_score: float = Field(0.8, gt=0, le=1)
     match_patience_scans: int = Field(30, ge=1, description="after this, match despite doubt")
