@@ -209,6 +209,35 @@ def test_person_hypothesis_wins_for_walking_legs_and_chair_for_a_still_box():
     assert chair.dominant() == "chair"
 
 
+def test_chair_evidence_is_aligned_against_pose_jitter():
+    """A still L-shaped piece seen 20 times from poses off by a few cm, a different offset each
+    scan: aligned onto the evidence (``chair_align_cells``), the grid keeps the outline; without,
+    it smears over neighbouring cells. A walking person's track is still a person."""
+    rng = np.random.default_rng(4)
+    outline = _l_shape() + [3.0, 2.0]
+    offsets = rng.normal(0.0, 0.04, size=(20, 2))
+    cells = {}
+    for k in (0, 2):
+        cfg = CFG.model_copy(update={"chair_align_cells": k})
+        chair = Metaobject(1, outline + offsets[0], 0.0, cfg, 0.05)
+        for i in range(1, 20):
+            chair.update(outline + offsets[i], 0.1 * i)
+        assert chair.dominant() == "chair"
+        cells[k] = chair.chair_points(min_count=5)
+        walker = Metaobject(2, _legs(0.0), 0.0, cfg, 0.05)
+        for i in range(1, 15):
+            walker.update(_legs(0.1 * i), 0.1 * i)
+        assert walker.dominant() == "person"
+    true_cells = {tuple(c) for c in np.floor(outline / 0.05).astype(int).tolist()}
+    # cells hit in at least 5 of the 20 scans: the outline's own cells when aligned
+    aligned = {tuple(c) for c in np.floor(cells[2] / 0.05).astype(int).tolist()}
+    smeared = {tuple(c) for c in np.floor(cells[0] / 0.05).astype(int).tolist()}
+    assert len(true_cells) < len(aligned) < 0.9 * len(smeared)
+    # (aligned onto the first scans, so possibly shifted as a whole by their offset)
+    shift = cells[2].mean(axis=0) - outline.mean(axis=0)
+    assert np.hypot(*shift) < 0.1
+
+
 @pytest.mark.parametrize(
     "pts_fn",
     [
