@@ -95,3 +95,18 @@ def make_scan(
         laser_pose_xytheta=np.zeros(3),
         gt_pose_xytheta=pose.copy(),
     )
+
+
+def drive_scans(world: OccupancyGrid, true_xytheta: np.ndarray, *, odom_scale: float = 1.0,
+                max_range_m: float = 4.0, seed: int = 3) -> list[Scan]:
+    """Scans (181 beams, 1 cm noise) of ``world`` from the poses ``true_xytheta`` (N, 3), with
+    odometry whose steps are ``odom_scale`` times the true ones (a wheel-scale error)."""
+    from gatmo.geometry import compose, relative
+
+    steps = relative(true_xytheta[:-1], true_xytheta[1:]) * [odom_scale, odom_scale, 1.0]
+    odom = [true_xytheta[0]]
+    for s in steps:
+        odom.append(compose(odom[-1], s))
+    rng = np.random.default_rng(seed)
+    return [make_scan(world, p, n_beams=181, max_range_m=max_range_m, noise_m=0.01, rng=rng,
+                      odom_pose_xytheta=o) for p, o in zip(true_xytheta, odom, strict=True)]

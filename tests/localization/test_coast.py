@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from gatmo.geometry import compose, relative
 from gatmo.localization import AmclConfig, MonteCarloLocalizer
 from gatmo.localization.sensor import SensorModel
 from gatmo.maps.likelihood import LikelihoodField
-from tests.helpers import make_scan, room_grid
+from tests.helpers import drive_scans, make_scan, room_grid
 
 RES = 0.05
 ROUTE_Y = 5.0
@@ -47,13 +46,7 @@ def _cfg(**kw) -> AmclConfig:
 def _drive(real, odom_scale=1.01):
     xs = np.arange(2.0, 17.0, 0.1)
     true = np.column_stack([xs, np.full_like(xs, ROUTE_Y), np.zeros_like(xs)])
-    steps = relative(true[:-1], true[1:]) * [odom_scale, odom_scale, 1.0]
-    odom = [true[0]]
-    for s in steps:
-        odom.append(compose(odom[-1], s))
-    rng = np.random.default_rng(5)
-    return [make_scan(real, p, n_beams=181, max_range_m=3.5, noise_m=0.01, rng=rng,
-                      odom_pose_xytheta=o) for p, o in zip(true, odom, strict=True)]
+    return drive_scans(real, true, odom_scale=odom_scale, max_range_m=3.5, seed=5)
 
 
 def test_unexplained_scan_is_held_back():

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from gatmo.geometry import compose, relative
 from gatmo.localization import AmclConfig, MonteCarloLocalizer
 from gatmo.localization import _kernels as K
 from gatmo.localization.sensor import SensorModel, select_beams, unmapped_beams_reference
 from gatmo.maps.grid import OCCUPIED, UNKNOWN
 from gatmo.maps.likelihood import LikelihoodField
-from tests.helpers import make_scan, room_grid
+from tests.helpers import drive_scans, make_scan, room_grid
 
 RES = 0.05
 DOOR_Y = (3.4, 4.6)
@@ -131,14 +130,7 @@ def _excursion(real, odom_scale=1.01):
         pts += [[*a, pts[-1][2] + turn * (i + 1) / k] for i in range(k)]
         n = int(np.ceil(np.hypot(*(b - a)) / 0.1))
         pts += [[*(a + (b - a) * t), th] for t in np.arange(1, n + 1) / n]
-    true = np.array(pts)
-    steps = relative(true[:-1], true[1:]) * [odom_scale, odom_scale, 1.0]
-    odom = [true[0]]
-    for s in steps:
-        odom.append(compose(odom[-1], s))
-    rng = np.random.default_rng(3)
-    return [make_scan(real, p, n_beams=181, max_range_m=4.0, noise_m=0.01, rng=rng,
-                      odom_pose_xytheta=o) for p, o in zip(true, odom, strict=True)]
+    return drive_scans(real, np.array(pts), odom_scale=odom_scale, max_range_m=4.0, seed=3)
 
 
 def test_leaving_the_map_and_returning_keeps_track():
