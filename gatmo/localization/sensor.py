@@ -312,9 +312,11 @@ class SensorModel:
         # z_hit exp(-d^2 / 2 sigma^2) > z_rand / range_max; the fraction per particle, then
         # for the best tenth of them: a cloud spread by coasting is not unexplained because
         # most of its particles are off
-        ratio = c.z_hit * rmax / max(c.z_rand, 1e-12)
-        d_max = c.sigma_hit_m * np.sqrt(2.0 * np.log(ratio)) if ratio > 1.0 else 0.0
-        self.last_explained_fraction = float(np.quantile((zs < d_max).mean(axis=1), 0.9))
+        # (measured only when the gate is on: it costs a pass over particles x beams)
+        if c.min_explained_beam_fraction > 0.0:
+            ratio = c.z_hit * rmax / max(c.z_rand, 1e-12)
+            d_max = c.sigma_hit_m * np.sqrt(2.0 * np.log(ratio)) if ratio > 1.0 else 0.0
+            self.last_explained_fraction = float(np.quantile((zs < d_max).mean(axis=1), 0.9))
         if gate_unexplained and self.last_explained_fraction < c.min_explained_beam_fraction:
             self.last_gated = True
             return np.zeros(len(particles)), 0
