@@ -3,6 +3,8 @@ coast on odometry, for at most ``max_coast_m`` of travel."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from gatmo.localization import AmclConfig, MonteCarloLocalizer
@@ -49,6 +51,14 @@ def _drive(real, odom_scale=1.01):
     return drive_scans(real, true, odom_scale=odom_scale, max_range_m=3.5, seed=5)
 
 
+@functools.cache
+def _scenario():
+    """(mapped, scans along the route, the true x of each scan), built once for the module."""
+    real, mapped = _worlds()
+    scans = _drive(real)
+    return mapped, scans, np.array([s.gt_pose_xytheta[0] for s in scans])
+
+
 def test_unexplained_scan_is_held_back():
     real, mapped = _worlds()
     model = SensorModel(LikelihoodField(mapped.copy(), 2.0), _cfg(min_explained_beam_fraction=0.5))
@@ -82,9 +92,7 @@ def _run(cfg, scans, mapped):
 
 
 def test_filter_coasts_through_unexplained_stretch_and_recaptures():
-    real, mapped = _worlds()
-    scans = _drive(real)
-    gx = np.array([s.gt_pose_xytheta[0] for s in scans])
+    mapped, scans, gx = _scenario()
     loc, err, weighed = _run(_cfg(min_explained_beam_fraction=0.5, max_coast_m=10.0), scans,
                              mapped)
     moved = (gx > 7.5) & (gx < 12.0)  # only boxes the map has elsewhere in view
@@ -103,9 +111,7 @@ def test_filter_coasts_through_unexplained_stretch_and_recaptures():
 
 
 def test_coasting_is_bounded():
-    real, mapped = _worlds()
-    scans = _drive(real)
-    gx = np.array([s.gt_pose_xytheta[0] for s in scans])
+    mapped, scans, gx = _scenario()
     loc, err, weighed = _run(_cfg(min_explained_beam_fraction=0.5, max_coast_m=1.0), scans,
                              mapped)
     moved = (gx > 9.5) & (gx < 12.5)
