@@ -5,11 +5,19 @@ the localizer's.
 
     python -m benchmarks.bench_gatmo_oracle [--seeds 5] [--first-seed 100] [--procs 2]
         [--return-prob 0.3 --runs 6] [--set gatmo.prior_earlier_poses=false --tag _noprior]
-        [--pose-noise 0.03,1.0]
+        [--pose-noise 0.03,1.0] [--pose-source stack --error-band all|none|const|slow|mid|fast]
 
 ``--pose-noise XY_M,YAW_DEG``: the true poses with an error added, slowly varying as a
 filter's is (per axis a first-order autoregressive series, correlation 0.95 from scan to scan,
 of that standard deviation): how much pose error GATMO tolerates.
+
+``--pose-source stack``: first the full stack runs the scenario (``gatmo compare``'s full-stack
+side, the object map carried over as usual); then GATMO starts afresh and is replayed on the
+scans the stack trusted, at the true poses plus the stack's error in the band named by
+``--error-band``: ``all`` (the stack's own poses), ``const`` (each run's median error),
+``slow`` (its moving average over 101 scans), ``mid`` (15-scan minus 101-scan averages) or
+``fast`` (the rest), and ``none`` (true poses, only the stack's choice of scans). Which kind of
+localization error costs GATMO its finds, without the feedback loop.
 
 Outcomes: found (right object, true pose), twin (at an identical piece's true pose: the map is
 right, the identity swapped), wrong (relocated elsewhere), absent (noticed gone, not found),
@@ -45,9 +53,53 @@ def pose_errors(n: int, std_xy_m: float, std_yaw_deg: float, rng: np.random.Gene
     return out
 
 
+def error_band(err: np.ndarray, trusted: np.ndarray, band: str) -> np.ndarray:
+    """The part ``band`` (see the module docstring) of a pose error series ``err`` (N, 3)
+    [m, m, rad]; ``trusted`` (N,) bool: the scans whose error makes the constant."""
+    from scipy.ndimage import uniform_filter1d
+
+    if band == "all":
+        return err
+    if band == "none":
+        return np.zeros_like(err)
+    if band == "const":
+        ref = err[trusted] if trusted.any() else err
+        return np.broadcast_to(np.median(ref, axis=0), err.shape).copy()
+    slow = uniform_filter1d(err, 101, axis=0, mode="nearest")
+    if band == "slow":
+        return slow
+    mid = uniform_filter1d(err, 15, axis=0, mode="nearest")
+    if band == "mid":
+        return mid - slow
+    if band == "fast":
+        return err - mid
+    raise ValueError(f"unknown error band {band!r}")
+
+
+def stack_pose_errors(scen, cfg, tmp: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per run (error (N, 3), trusted (N,) bool) of the poses the full stack gave GATMO
+    against the truth; an untrusted scan's error is the published pose's."""
+    from gatmo.geometry import wrap_angle
+    from gatmo.pipeline.runs import compare, load_scans
+
+    res = compare(scen.map_yaml, scen.logs, tmp / "stack", scenario_json=scen.scenario_json,
+                  config=cfg, pictures=False, keep_traces=True, sides=("gatmo",))
+    out = []
+    for k, log in enumerate(scen.logs):
+        tr = res.traces[(k, "gatmo")]
+        gt = np.array([s.gt_pose_xytheta for s in load_scans(log)], dtype=float)
+        trusted = np.isfinite(tr.gatmo_poses_xytheta[:, 0])
+        pose = np.where(trusted[:, None], tr.gatmo_poses_xytheta, tr.poses_xytheta)
+        err = pose - gt
+        err[:, 2] = wrap_angle(err[:, 2])
+        out.append((err, trusted))
+    return out
+
+
 def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
              overrides: list[str] | None = None,
-             pose_noise: tuple[float, float] | None = None) -> list[dict]:
+             pose_noise: tuple[float, float] | None = None,
+             pose_source: str = "truth", band: str = "all") -> list[dict]:
     from benchmarks._overrides import with_overrides
     from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.maps.io import load_map
@@ -66,14 +118,22 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
     prev = {p["id"]: p for p in doc["map_objects"]}
     rows = []
     noise_rng = np.random.default_rng([seed, 7])
+    stack = (stack_pose_errors(scen, cfg, tmp / f"s{seed}") if pose_source == "stack"
+             else None)
     for k, log in enumerate(scen.logs):
         scans = load_scans(log)
         mapper.begin_run(k + 1)
         events = []
-        err = (np.zeros((len(scans), 3)) if pose_noise is None else
-               pose_errors(len(scans), *pose_noise, noise_rng))
+        trusted = np.ones(len(scans), dtype=bool)
+        if stack is not None:
+            err, trusted = stack[k]
+            err = error_band(err, trusted, band)
+        elif pose_noise is None:
+            err = np.zeros((len(scans), 3))
+        else:
+            err = pose_errors(len(scans), *pose_noise, noise_rng)
         for i, s in enumerate(scans):
-            for e in mapper.update(s.gt_pose_xytheta + err[i], s, pose_confident=True,
+            for e in mapper.update(s.gt_pose_xytheta + err[i], s, pose_confident=trusted[i],
                                    stamp_s=s.stamp_s):
                 events.append(dict(e.as_dict(), scan=i))
         events += [dict(e.as_dict(), scan=len(scans)) for e in mapper.end_run()]
@@ -104,6 +164,10 @@ def main(argv=None) -> int:
     ap.add_argument("--procs", type=int, default=1, help="seeds run in parallel")
     ap.add_argument("--pose-noise", default=None, metavar="XY_M,YAW_DEG",
                     help="add a slowly varying error of these standard deviations to the poses")
+    ap.add_argument("--pose-source", choices=("truth", "stack"), default="truth",
+                    help="stack: the scans the full stack trusted, with its error (--error-band)")
+    ap.add_argument("--error-band", choices=("all", "none", "const", "slow", "mid", "fast"),
+                    default="all", help="with --pose-source stack: which part of its error")
     add_override_args(ap)
     args = ap.parse_args(argv or [])
     rows: list[dict] = []
@@ -112,7 +176,8 @@ def main(argv=None) -> int:
         float(x) for x in args.pose_noise.split(","))
     with tempfile.TemporaryDirectory() as tmp:
         job = partial(one_seed, runs=args.runs, tmp=Path(tmp), return_prob=args.return_prob,
-                      overrides=args.set, pose_noise=noise)
+                      overrides=args.set, pose_noise=noise, pose_source=args.pose_source,
+                      band=args.error_band)
         with ProcessPoolExecutor(args.procs) as ex:
             for seed, r in zip(seeds, ex.map(job, seeds), strict=True):
                 rows += r
@@ -127,7 +192,9 @@ def main(argv=None) -> int:
     n_both = max(sum(both.values()), 1)
     scans = [r["scans_to_match"] for r in rows if r["outcome"] == "found"
              and r["scans_to_match"] is not None]
-    total = {"seeds": args.seeds, "pose_noise": noise, "by_observability": table,
+    total = {"seeds": args.seeds, "pose_noise": noise, "pose_source": args.pose_source,
+             "error_band": args.error_band if args.pose_source == "stack" else None,
+             "by_observability": table,
              "found_of_seen_both": both.get("found", 0) / n_both,
              "found_or_twin_of_seen_both": (both.get("found", 0) + both.get("twin", 0)) / n_both,
              "wrong_per_run": sum(d["wrong"] for d in table.values()) / (args.seeds * args.runs),

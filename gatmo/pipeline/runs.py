@@ -45,6 +45,9 @@ class RunTrace:
     events: list = field(default_factory=list)
     resets: int = 0
     map_updates: int = 0
+    # (N, 3) base poses (map frame) the stack handed GATMO as trusted; NaN rows: scans it was
+    # not handed (no trusted pose; every scan on the static side); None: not recorded
+    gatmo_poses_xytheta: np.ndarray | None = None
 
     def mean_ms(self) -> float:
         return float(np.mean(self.ms)) if len(self.ms) else float("nan")
@@ -172,6 +175,7 @@ def run_side(
     poses = np.empty((n, 3))
     loc_poses = np.empty((n, 3))
     confident = np.zeros(n, dtype=bool)
+    gatmo_poses = np.full((n, 3), np.nan)
     ms = np.empty(n)
     events: list = []
     resets = 0
@@ -181,6 +185,8 @@ def run_side(
         poses[i] = step.pose_xytheta
         loc_poses[i] = step.localizer_pose_xytheta
         confident[i] = step.confident
+        if step.gatmo_pose_xytheta is not None:
+            gatmo_poses[i] = step.gatmo_pose_xytheta
         ms[i] = step.ms
         resets += int(step.reset)
         for ev in step.events:
@@ -208,6 +214,7 @@ def run_side(
         events=events,
         resets=resets,
         map_updates=stack.n_map_updates,
+        gatmo_poses_xytheta=gatmo_poses,
     )
 
 

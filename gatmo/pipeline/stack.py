@@ -161,6 +161,9 @@ class StackStep:
     events: list = field(default_factory=list)
     map_changed: bool = False
     ms: float = 0.0
+    # the base pose (map frame) handed to GATMO as trusted, after the scan-to-map alignment (so
+    # it may differ from pose_xytheta); None: GATMO was not handed this scan as trusted
+    gatmo_pose_xytheta: np.ndarray | None = None
 
 
 def _injected(localizer) -> int:
@@ -292,6 +295,7 @@ class LocalizationStack:
 
         events: list = []
         changed = False
+        gatmo_pose = None
         if self.mapper is not None:
             # the filter updates only every update_min_d of travel; between its confident
             # updates the matcher's pose stays precise for a while (confident_for_m), and the
@@ -317,6 +321,8 @@ class LocalizationStack:
                     map_pose, pose_ok, verified = refined, True, True
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
                                         stamp_s=scan.stamp_s, pose_verified=verified)
+            if pose_ok:
+                gatmo_pose = np.asarray(map_pose, dtype=float).copy()
             for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
                 self.localizer.update_map_region(cells_new, ix0, iy0)
                 changed = True
@@ -335,6 +341,7 @@ class LocalizationStack:
             events=list(events),
             map_changed=changed,
             ms=(time.perf_counter() - t0) * 1e3,
+            gatmo_pose_xytheta=gatmo_pose,
         )
 
     def _masked(self, scan: Scan) -> Scan:

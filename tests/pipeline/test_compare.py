@@ -91,3 +91,22 @@ def test_map_render_from_known_poses(scen, tmp_path):
     occ = m.occupied_cells_world()
     assert len(occ) > 100
     assert np.mean(truth.value_at(occ) != 0) > 0.6  # mostly on mapped or moved things
+
+
+def test_traces_keep_the_poses_gatmo_was_given(scen, tmp_path):
+    from gatmo.pipeline.config import sim_stack_config
+    from gatmo.pipeline.runs import compare, load_scans
+
+    res = compare(scen.map_yaml, scen.logs, tmp_path / "c", config=sim_stack_config(),
+                  pictures=False, keep_traces=True)
+    for k, log in enumerate(scen.logs):
+        gt = np.array([s.gt_pose_xytheta for s in load_scans(log)])
+        static, full = res.traces[(k, "static")], res.traces[(k, "gatmo")]
+        assert np.isnan(static.gatmo_poses_xytheta).all()  # no GATMO on the static side
+        given = full.gatmo_poses_xytheta
+        trusted = np.isfinite(given[:, 0])
+        # GATMO lays most scans of a simulated run from a trusted pose, and that pose is
+        # the one it was handed: close to the truth
+        assert 0.2 < trusted.mean() <= 1.0
+        err = np.hypot(*(given[trusted, :2] - gt[trusted, :2]).T)
+        assert np.median(err) < 0.1
