@@ -125,8 +125,11 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
         mapper.begin_run(k + 1)
         events = []
         trusted = np.ones(len(scans), dtype=bool)
+        stack_err_m = None
         if stack is not None:
             err, trusted = stack[k]
+            if trusted.any():  # how far off the poses the stack trusted were, this run
+                stack_err_m = float(np.median(np.hypot(err[trusted, 0], err[trusted, 1])))
             err = error_band(err, trusted, band)
         elif pose_noise is None:
             err = np.zeros((len(scans), 3))
@@ -149,7 +152,8 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
             obs = observed(scans, prev[pid], cur.get(pid))
             rows.append({"seed": seed, "run": k + 1, "label": c["label"], "kind": c["kind"],
                          "returned": bool(c.get("returned")), "observed": obs, "outcome": out,
-                         "scans_to_match": rel[-1]["support_scans"] if rel else None})
+                         "scans_to_match": rel[-1]["support_scans"] if rel else None,
+                         "stack_median_error_m": stack_err_m})
         prev = cur
     return rows
 
@@ -199,6 +203,14 @@ def main(argv=None) -> int:
              "found_or_twin_of_seen_both": (both.get("found", 0) + both.get("twin", 0)) / n_both,
              "wrong_per_run": sum(d["wrong"] for d in table.values()) / (args.seeds * args.runs),
              "median_scans_to_match": float(np.median(scans)) if scans else None}
+    if args.pose_source == "stack":
+        # found among the pieces seen at both places, by how far off the stack's trusted poses
+        # were in that run (median): is the loss spread out or in the runs it got wrong?
+        for lo, hi in ((0.0, 0.03), (0.03, 0.1), (0.1, np.inf)):
+            sel = [r for r in rows if r["observed"] == "both" and r["stack_median_error_m"]
+                   is not None and lo <= r["stack_median_error_m"] < hi]
+            total[f"found_of_seen_both_stack_error_{lo}_{hi}_m"] = (
+                len(sel), sum(r["outcome"] == "found" for r in sel) / max(len(sel), 1))
     back = [r for r in rows if r["returned"] and r["observed"] == "both"]
     if back:  # pieces put back where they stood before (--return-prob)
         total["returned_seen_both"] = len(back)

@@ -352,3 +352,26 @@ def test_a_verified_alignment_may_vouch_for_a_pose_the_filter_is_not_sure_of(
     # (the first scan, which resets the matcher's offset, counts as confident_for_m)
     assert mapper.trusted[1:] == [trusted] * (len(scans) - 1)
     assert mapper.verified[1:] == [trusted] * (len(scans) - 1)
+
+
+@pytest.mark.parametrize("gain", [1.0, 0.25])
+def test_gatmo_pose_gain_averages_the_alignment_jitter_out(gain):
+    rng = np.random.default_rng(3)
+    stack = LocalizationStack(None, fusion=FusionConfig(gatmo_pose_gain=gain))
+    n = 400
+    # the robot drives a wide arc; the local frame (matcher / odometry) has its own origin
+    true = np.stack([0.02 * np.arange(n), np.sin(0.01 * np.arange(n)), 0.01 * np.arange(n)], 1)
+    T_local_map = np.array([3.0, -1.0, 0.7])
+    jitter = rng.normal(0.0, 1.0, (n, 3)) * [0.02, 0.02, np.radians(1.0)]
+    out = np.array([stack._smoothed(true[i] + jitter[i], compose(T_local_map, true[i]))
+                    for i in range(n)])
+    err = out - true
+    err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    if gain == 1.0:
+        np.testing.assert_allclose(err, jitter, atol=1e-12)
+    else:  # white jitter through a first-order filter: std x sqrt(g / (2 - g)) = 0.38x
+        ratio = np.std(err[20:], axis=0) / np.std(jitter[20:], axis=0)
+        assert np.all(ratio < 0.5) and np.all(ratio > 0.25)
+    # a pose the alignment moved further than it may correct restarts the filter there
+    far = true[-1] + [0.5, 0.0, 0.0]
+    np.testing.assert_allclose(stack._smoothed(far, compose(T_local_map, true[-1])), far)
