@@ -66,7 +66,9 @@ class FusionConfig(GatmoModel):
     it, odometry's) increment from the last pose it was handed on the scan before, and moves
     only this fraction of the way to the scan-to-map alignment's pose: a complementary filter on
     the alignment's scan-to-scan jitter (1-2 cm, about 1 deg), which smears the chair
-    hypothesis. Beyond the paper.
+    hypothesis. Beyond the paper. Measured at 0.3 on hall seeds 300-309 it changes little
+    (moved pieces found 12.0 % -> 13.2 %, false relocations 0.70 -> 0.80 per run, time lost
+    5.7 % -> 5.5 %), so it is off.
 
     ``mask_unexplained``: returns that land, seen from the pose odometry predicts, where GATMO
     found this run's returns unexplained by the current map (furniture it has not placed yet,
