@@ -318,6 +318,23 @@ class GatmoMapper:
             (self._near_dist[cy, cx] > self.cfg.delta_W_m)
         return out
 
+    def doubted_at(self, points_xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: map-frame points (N, 2) within delta_W of an object in doubt (beams
+        passed through part of it this run: it may have been shifted, and returns near its
+        old place would pull a localizer towards it). Beyond the paper."""
+        out = np.zeros(len(points_xy), dtype=bool)
+        if not self._doubt:
+            return out
+        g = self._grid
+        c = g.world_to_cell(np.asarray(points_xy, dtype=float).reshape(-1, 2))
+        ok = g.in_bounds(c)
+        cy, cx = c[ok, 1], c[ok, 0]
+        owner = self._near_owner[cy, cx]
+        objs = self.object_map.objects
+        doubted = np.array([i >= 0 and objs[i].id in self._doubt for i in owner], dtype=bool)
+        out[ok] = doubted & (self._near_dist[cy, cx] <= self.cfg.delta_W_m)
+        return out
+
     def _count_near_returns(self, pts: np.ndarray, lp: np.ndarray) -> None:
         g = self._grid
         c = g.world_to_cell(pts)

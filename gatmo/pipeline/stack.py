@@ -72,7 +72,10 @@ class FusionConfig(GatmoModel):
 
     ``mask_unexplained``: returns that land, seen from the pose odometry predicts, where GATMO
     found this run's returns unexplained by the current map (furniture it has not placed yet,
-    people) are withheld from the localizer. Beyond the paper.
+    people) are withheld from the localizer. Beyond the paper. ``mask_doubted`` (off; needs
+    ``mask_unexplained``) also withholds returns within delta_W of an object GATMO doubts
+    (beams passed through part of it this run): a piece shifted by less than its size
+    returns next to its old place and pulls the filter there.
 
     ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
     estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
@@ -100,6 +103,7 @@ class FusionConfig(GatmoModel):
     align_inconclusive: Literal["filter_pose", "skip"] = "filter_pose"
     verified_suffices: bool = False
     mask_unexplained: bool = True
+    mask_doubted: bool = False
     gatmo_pose_gain: float = Field(1.0, gt=0, le=1)
 
 
@@ -396,6 +400,8 @@ class LocalizationStack:
         r = scan.ranges_m[valid]
         pts = lp[:2] + r[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
         bad = unexplained_at(pts)
+        if self.fusion.mask_doubted:
+            bad |= self.mapper.doubted_at(pts)
         self.n_masked += int(bad.sum())
         if not bad.any():
             return scan

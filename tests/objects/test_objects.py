@@ -69,6 +69,25 @@ def test_shifted_small_object_is_in_doubt_not_absent_and_relocated_with_its_id()
     assert np.hypot(*(box.pose_xytheta[:2] - [5.075, 3.0])) < 0.06
 
 
+def test_returns_near_an_object_in_doubt_are_flagged_for_the_localizer():
+    # the same shifted box: once beams pass through its old place it is in doubt, and points
+    # near it (where its shifted returns land) are flagged; points near walls never are
+    g = room_grid(10, 6, 0.05, boxes=[(5, 2.6, 5.15, 2.8)])
+    world = room_grid(10, 6, 0.05, boxes=[(5, 2.9, 5.15, 3.1)])
+    m = GatmoMapper.from_config(CFG, g)
+    m.begin_run(1)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    probe = np.array([[5.075, 2.87], [5.2, 2.7], [0.1, 3.0], [5.075, 0.1]])
+    assert not m.doubted_at(probe).any()
+    for i, x in enumerate(np.linspace(2.0, 3.0, 30)):
+        s = make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=0.1 * i)
+        m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=0.1 * i)
+        if box.id in m._doubt:
+            break
+    assert box.id in m._doubt and box.status == "U"
+    assert m.doubted_at(probe).tolist() == [True, True, False, False]
+
+
 def _one_object(size_m, map_box, world_boxes, **cfg_update):
     """(mapper in run 1, its one object, the world) for a room of ``size_m`` (w, h) whose map
     has ``map_box`` and whose world has ``world_boxes`` instead."""

@@ -302,6 +302,34 @@ def test_returns_gatmo_cannot_explain_are_withheld_from_the_localizer():
         assert (stack.n_masked > 0) == expect
 
 
+def test_returns_near_a_doubted_object_are_withheld_with_mask_doubted():
+    """A box shifted 0.3 m: once beams pass through its old place GATMO doubts it, and with
+    ``mask_doubted`` the returns landing near its old place (its shifted front) are withheld
+    from the localizer; the walls' returns never are."""
+    from gatmo.objects import GatmoConfig, GatmoMapper
+
+    grid = room_grid(10, 6, 0.05, boxes=[(5, 2.6, 5.15, 2.8)])
+    world = room_grid(10, 6, 0.05, boxes=[(5, 2.9, 5.15, 3.1)])
+    truth = np.array([[x, 2.75, 0.0] for x in np.linspace(2.0, 3.0, 30)])
+    scans = [make_scan(world, p, n_beams=181, max_range_m=8.0, odom_pose_xytheta=p,
+                       stamp_s=0.1 * i) for i, p in enumerate(truth)]
+    masked = {}
+    for flag in (False, True):
+        loc = RecordingLocalizer(truth)
+        stack = LocalizationStack(loc, None, GatmoMapper.from_config(GatmoConfig(), grid),
+                                  FusionConfig(align_to_map=False, mask_doubted=flag))
+        stack.begin_run(1)
+        for s in scans:
+            stack.step(s)
+        for p, orig, seen in zip(truth, scans, loc.scans, strict=True):
+            ends = p[:2] + orig.ranges_m[:, None] * np.stack(
+                [np.cos(orig.angles_rad), np.sin(orig.angles_rad)], axis=1)
+            near_box = np.hypot(ends[:, 0] - 5.075, ends[:, 1] - 2.85) < 0.45
+            assert not np.isnan(seen.ranges_m[~near_box]).any()  # walls: never withheld
+        masked[flag] = stack.n_masked
+    assert masked[True] > masked[False] + 5
+
+
 def test_gatmo_is_told_which_poses_the_alignment_confirmed():
     """In a room full of furniture the map lacks, the alignment is inconclusive: GATMO gets the
     filter's pose (trusted) but not as verified; in the room as mapped, verified."""
