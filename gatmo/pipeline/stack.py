@@ -75,7 +75,9 @@ class FusionConfig(GatmoModel):
     people) are withheld from the localizer. Beyond the paper. ``mask_doubted`` (off; needs
     ``mask_unexplained``) also withholds returns within delta_W of an object GATMO doubts
     (beams passed through part of it this run): a piece shifted by less than its size
-    returns next to its old place and pulls the filter there.
+    returns next to its old place and pulls the filter there. Measured on hall seeds 300-309:
+    time lost 5.7 % -> 5.1 %, moved pieces found 12.0 % -> 11.4 %, false relocations 0.70 ->
+    0.82 per run; off until more seeds separate it from the seed-to-seed swing.
 
     ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
     estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
