@@ -51,15 +51,20 @@ def test_algorithm1_marks_an_object_absent_when_rays_pass_through():
     assert changes and m.pop_map_changes() == []
 
 
+def _shifted_box():
+    """(mapper in run 1, its box, the world): a 15 x 20 cm box the world has 0.3 m to the
+    side of where the map has it."""
+    m = GatmoMapper.from_config(CFG, room_grid(10, 6, 0.05, boxes=[(5, 2.6, 5.15, 2.8)]))
+    m.begin_run(1)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    return m, box, room_grid(10, 6, 0.05, boxes=[(5, 2.9, 5.15, 3.1)])
+
+
 def test_shifted_small_object_is_in_doubt_not_absent_and_relocated_with_its_id():
     # a 15 x 20 cm object moved 0.3 m sideways: rays pass through its old cells, but its returns
     # land right beside them; small objects are then in doubt, not absent, until the chair
     # there relocates them (a false absence would lose it from the map meanwhile)
-    g = room_grid(10, 6, 0.05, boxes=[(5, 2.6, 5.15, 2.8)])
-    world = room_grid(10, 6, 0.05, boxes=[(5, 2.9, 5.15, 3.1)])
-    m = GatmoMapper.from_config(CFG, g)
-    m.begin_run(1)
-    box = [o for o in m.object_map.objects if not o.structure][0]
+    m, box, world = _shifted_box()
     events = []
     for i, x in enumerate(np.linspace(2.0, 3.0, 30)):
         s = make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=0.1 * i)
@@ -72,11 +77,7 @@ def test_shifted_small_object_is_in_doubt_not_absent_and_relocated_with_its_id()
 def test_returns_near_an_object_in_doubt_are_flagged_for_the_localizer():
     # the same shifted box: once beams pass through its old place it is in doubt, and points
     # near it (where its shifted returns land) are flagged; points near walls never are
-    g = room_grid(10, 6, 0.05, boxes=[(5, 2.6, 5.15, 2.8)])
-    world = room_grid(10, 6, 0.05, boxes=[(5, 2.9, 5.15, 3.1)])
-    m = GatmoMapper.from_config(CFG, g)
-    m.begin_run(1)
-    box = [o for o in m.object_map.objects if not o.structure][0]
+    m, box, world = _shifted_box()
     probe = np.array([[5.075, 2.87], [5.2, 2.7], [0.1, 3.0], [5.075, 0.1]])
     assert not m.doubted_at(probe).any()
     for i, x in enumerate(np.linspace(2.0, 3.0, 30)):
