@@ -76,23 +76,19 @@ def error_band(err: np.ndarray, trusted: np.ndarray, band: str) -> np.ndarray:
     raise ValueError(f"unknown error band {band!r}")
 
 
-def stack_pose_errors(scen, cfg, tmp: Path) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per run (error (N, 3), trusted (N,) bool) of the poses the full stack gave GATMO
-    against the truth; an untrusted scan's error is the published pose's."""
-    from gatmo.geometry import wrap_angle
-    from gatmo.pipeline.runs import compare, load_scans
+def stack_poses(scen, cfg, tmp: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per run (poses (N, 3), trusted (N,) bool): the base poses (map frame) the full stack
+    handed GATMO as trusted, and its published pose on the other scans."""
+    from gatmo.pipeline.runs import compare
 
     res = compare(scen.map_yaml, scen.logs, tmp / "stack", scenario_json=scen.scenario_json,
                   config=cfg, pictures=False, keep_traces=True, sides=("gatmo",))
     out = []
-    for k, log in enumerate(scen.logs):
+    for k in range(len(scen.logs)):
         tr = res.traces[(k, "gatmo")]
-        gt = np.array([s.gt_pose_xytheta for s in load_scans(log)], dtype=float)
         trusted = np.isfinite(tr.gatmo_poses_xytheta[:, 0])
-        pose = np.where(trusted[:, None], tr.gatmo_poses_xytheta, tr.poses_xytheta)
-        err = pose - gt
-        err[:, 2] = wrap_angle(err[:, 2])
-        out.append((err, trusted))
+        out.append((np.where(trusted[:, None], tr.gatmo_poses_xytheta, tr.poses_xytheta),
+                    trusted))
     return out
 
 
@@ -102,6 +98,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
              pose_source: str = "truth", band: str = "all") -> list[dict]:
     from benchmarks._overrides import with_overrides
     from gatmo.datasets.sim import SimConfig, simulate_scenario
+    from gatmo.geometry import wrap_angle
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
@@ -118,8 +115,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
     prev = {p["id"]: p for p in doc["map_objects"]}
     rows = []
     noise_rng = np.random.default_rng([seed, 7])
-    stack = (stack_pose_errors(scen, cfg, tmp / f"s{seed}") if pose_source == "stack"
-             else None)
+    stack = stack_poses(scen, cfg, tmp / f"s{seed}") if pose_source == "stack" else None
     for k, log in enumerate(scen.logs):
         scans = load_scans(log)
         mapper.begin_run(k + 1)
@@ -127,7 +123,9 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
         trusted = np.ones(len(scans), dtype=bool)
         stack_err_m = None
         if stack is not None:
-            err, trusted = stack[k]
+            pose, trusted = stack[k]
+            err = pose - np.array([s.gt_pose_xytheta for s in scans], dtype=float)
+            err[:, 2] = wrap_angle(err[:, 2])
             if trusted.any():  # how far off the poses the stack trusted were, this run
                 stack_err_m = float(np.median(np.hypot(err[trusted, 0], err[trusted, 1])))
             err = error_band(err, trusted, band)

@@ -330,10 +330,13 @@ class GatmoMapper:
         ok = g.in_bounds(c)
         cy, cx = c[ok, 1], c[ok, 0]
         owner = self._near_owner[cy, cx]
-        objs = self.object_map.objects
-        doubted = np.array([i >= 0 and objs[i].id in self._doubt for i in owner], dtype=bool)
-        out[ok] = doubted & (self._near_dist[cy, cx] <= self.cfg.delta_W_m)
+        out[ok] = self._owned_by_doubted(owner) & (self._near_dist[cy, cx] <= self.cfg.delta_W_m)
         return out
+
+    def _owned_by_doubted(self, owner: np.ndarray) -> np.ndarray:
+        """(N,) bool: which entries of ``owner`` (object indices, < 0 for none) are in doubt."""
+        objs = self.object_map.objects
+        return np.array([i >= 0 and objs[i].id in self._doubt for i in owner], dtype=bool)
 
     def _count_near_returns(self, pts: np.ndarray, lp: np.ndarray) -> None:
         g = self._grid
@@ -358,9 +361,7 @@ class GatmoMapper:
         owner[ok] = self._near_owner[c[ok, 1], c[ok, 0]]
         explained = near.copy()
         if self._doubt:
-            objs = self.object_map.objects
-            doubted = np.array([i >= 0 and objs[i].id in self._doubt for i in owner], dtype=bool)
-            explained &= ~doubted
+            explained &= ~self._owned_by_doubted(owner)
         return near, explained
 
     # Algorithm 1, with hits clearing seen-through marks (beyond the paper)

@@ -340,13 +340,12 @@ class LocalizationStack:
                 if self._aligner.last_verified:
                     map_pose, pose_ok, verified = refined, True, True
             if pose_ok:
-                map_pose = self._smoothed(np.asarray(map_pose, dtype=float), base_ref)
+                map_pose = gatmo_pose = self._smoothed(np.asarray(map_pose, dtype=float),
+                                                       base_ref)
             else:
                 self._gatmo_last = None
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
                                         stamp_s=scan.stamp_s, pose_verified=verified)
-            if pose_ok:
-                gatmo_pose = np.asarray(map_pose, dtype=float).copy()
             for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
                 self.localizer.update_map_region(cells_new, ix0, iy0)
                 changed = True
@@ -373,7 +372,7 @@ class LocalizationStack:
         increment, moved ``gain`` of the way to ``map_pose``. Restarts after a scan GATMO was
         not handed, and where the two disagree by more than the alignment may correct."""
         g = self.fusion.gatmo_pose_gain
-        out = map_pose
+        out = np.array(map_pose, dtype=float)
         if g < 1.0 and self._gatmo_last is not None:
             last_pose, last_ref = self._gatmo_last
             pred = compose(last_pose, relative(last_ref, base_ref))
