@@ -95,6 +95,12 @@ class GatmoConfig(GatmoModel):
     earlier_pose_tolerance_m: float = Field(
         0.15, gt=0, description="a match this close (footprint distance) to an earlier pose "
         "is at that pose")
+    match_beam_check: bool = Field(
+        True, description="beyond the paper: the object placed at a match must not stand where "
+        "beams of the scans that saw the chair went on well past it")
+    match_through_m: float = Field(0.2, gt=0, description="a beam this far beyond: through")
+    match_max_through_fraction: float = Field(
+        0.1, ge=0, le=1, description="of the beams on the placed object or through it, through")
     match_min_edge_fraction: float = Field(0.3, ge=0, le=1)
     match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
     match_max_free_fraction: float = Field(0.05, ge=0, le=1)

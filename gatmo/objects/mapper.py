@@ -32,7 +32,7 @@ from gatmo.geometry import compose, transform_points
 from gatmo.maps.grid import FREE, OccupancyGrid
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
-from gatmo.objects.matching import EdgeField, lookalike, match_points
+from gatmo.objects.matching import EdgeField, beam_consistency, lookalike, match_points
 from gatmo.objects.meanshift import mean_shift
 from gatmo.objects.metaobject import Metaobject
 from gatmo.objects.objectmap import MapObject, ObjectMap, shape_from_points
@@ -117,6 +117,7 @@ class GatmoMapper:
                        "gamma_unverified": 0}
         self._ms: list[float] = []
         self._beams = None
+        self._view: tuple | None = None  # the scan being tracked (Metaobject.views)
         self._reset_run_evidence()
         self._build_owner()
 
@@ -137,6 +138,7 @@ class GatmoMapper:
         self._front: dict[int, set] = {}
         self._front_through: dict[int, set] = {}
         self._doubt: set[int] = set()
+        self._gamma_this_run: set[int] = set()  # Gamma objects seen this run
 
     # ------------------------------------------------------------------ maps
     def grid(self) -> OccupancyGrid:
@@ -294,6 +296,11 @@ class GatmoMapper:
         # untracked returns beyond, the rest of it shows in the ring test (_part_of_larger)
         reach = min(self.cfg.track_max_range_m,
                     scan.range_max_m - self.cfg.track_range_margin_m)
+        # the beams of this scan, for the matches of the tracks it feeds (_beams_consistent):
+        # an object cell within the laser's range stops a beam or is contradicted by it
+        self._view = (lp, scan.angles_rad, scan.ranges_m,
+                      min(scan.range_max_m, self.cfg.absence_max_range_m)
+                      - self.cfg.match_through_m)
         self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
                     verified=bool(pose_verified))
         self._expire(stamp_s, events)
@@ -562,6 +569,8 @@ class GatmoMapper:
             if m.matched_object is None and m.dominant() == "chair":
                 self._try_match(m, stamp_s, events)
         for g in list(self.object_map.Gamma):
+            if g.id not in self._gamma_this_run:
+                continue  # seen in an earlier run only: no evidence it still stands there
             if o.status != "A":
                 break
             self._try_match_gamma(g, o, stamp_s, events)
@@ -598,10 +607,14 @@ class GatmoMapper:
             m = by_id[mid]
             m.update(np.vstack(zs), stamp_s)
             m.n_verified += int(verified)
+            if self._view is not None:
+                m.add_view(self._view)
             touched.append(m)
         for z in fresh:
             m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m)
             m.n_verified = int(verified)
+            if self._view is not None:
+                m.add_view(self._view)
             self._next_meta += 1
             self._meta.append(m)
         self._merge_metaobjects()
@@ -708,6 +721,8 @@ class GatmoMapper:
                 continue
             if self._part_of_larger(o, mt):
                 continue
+            if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m):
+                continue
             dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
             # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
             if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
@@ -772,6 +787,15 @@ class GatmoMapper:
         if inside < 0:
             return True
         return bool(outside > max(3, 0.25 * inside))
+
+    def _beams_consistent(self, o: MapObject, mt, m: Metaobject) -> bool:
+        """Beyond the paper: of the beams of the scans that saw the chair which the object at
+        the match would have stopped, at most ``match_max_through_fraction`` went on well past
+        it (:func:`beam_consistency`): a match that only fits the part of the chair one side
+        showed is refused by the beams the other side let through."""
+        sup, con = beam_consistency(o, mt.pose_xytheta, m.views, self.cfg.hit_tolerance_m,
+                                    self.cfg.match_through_m)
+        return con <= self.cfg.match_max_through_fraction * (sup + con)
 
     def _something_there(self, o: MapObject) -> bool:
         """Beyond the paper, for small objects: returns this run on or just around an object
@@ -884,6 +908,7 @@ class GatmoMapper:
             shape, edge, pose = shape_from_points(pts, self._grid.resolution_m)
             same.shape_xy, same.edge_xy, same.pose_xytheta = shape, edge, pose
             same.seen_count += 1
+            self._gamma_this_run.add(same.id)
             self._fields.pop(same.id, None)
             self._inner.pop(same.id, None)
             self._cores.pop(same.id, None)
@@ -894,6 +919,7 @@ class GatmoMapper:
         self.object_map.next_id += 1
         o.record(self.run, stamp_s)
         self.object_map.objects.append(o)
+        self._gamma_this_run.add(o.id)
         events.append(Event(float(stamp_s), self.run, "gamma", o.id, None, None,
                             pose.tolist()))
         self.counts["gamma"] += 1

@@ -37,6 +37,8 @@ class Metaobject:
         self.centres: list[np.ndarray] = []
         self.matched_object: int | None = None
         self.n_verified = 0  # observations from independently confirmed poses (set by the mapper)
+        # the scans that saw it (set by the mapper): laser pose, angles, ranges, reach
+        self.views: list[tuple] = []
         self._add(points, stamp_s)
 
     # -------------------------------------------------------------- hypotheses
@@ -179,8 +181,18 @@ class Metaobject:
         return any((kx + dx, ky + dy) in large for kx, ky in small
                    for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 
+    def add_view(self, view: tuple, max_views: int = 48) -> None:
+        """Keep the scan ``view`` that saw this track; past ``max_views``, every other one is
+        dropped, so the kept views still span the whole track."""
+        self.views.append(view)
+        if len(self.views) > max_views:
+            self.views = self.views[::2]
+
     def absorb(self, other: Metaobject) -> None:
         """Merge ``other`` (a part of the same object tracked separately) into this track."""
+        for v in other.views:
+            if all(v is not w for w in self.views):
+                self.add_view(v)
         for k, v in other.evidence.items():
             self.evidence[k] = self.evidence.get(k, 0) + v
         self.n_obs = max(self.n_obs, other.n_obs)

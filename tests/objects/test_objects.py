@@ -623,3 +623,57 @@ def test_a_piece_where_it_stands_is_not_refused_for_free_space_at_its_edges(labe
 
     m, piece = _drive_past(label)
     assert m._free_consistent(piece, SimpleNamespace(pose_xytheta=piece.pose_xytheta))
+
+
+def _views_of(world, poses, max_range_m=4.0):
+    return [(np.asarray(p, dtype=float), s.angles_rad, s.ranges_m, max_range_m)
+            for p in poses for s in [make_scan(world, p, n_beams=361, max_range_m=max_range_m)]]
+
+
+def test_beam_consistency_refuses_a_larger_object_where_beams_went_on():
+    from gatmo.objects.matching import beam_consistency
+
+    # a 0.4 m box stands at (5, 3); the map object is a 1.2 m desk
+    world = room_grid(10, 6, 0.05, boxes=[(4.8, 2.8, 5.2, 3.2)])
+    desk_g = room_grid(10, 6, 0.05, boxes=[(2.0, 2.0, 3.2, 2.4)])
+    desk = [o for o in ObjectMap.from_grid(desk_g, CFG).objects if not o.structure][0]
+    box_g = room_grid(10, 6, 0.05, boxes=[(2.0, 2.0, 2.4, 2.4)])
+    box = [o for o in ObjectMap.from_grid(box_g, CFG).objects if not o.structure][0]
+    views = _views_of(world, [(3.0, 3.0, 0.0), (3.2, 2.2, 0.5), (3.2, 3.8, -0.5)])
+    at_box = np.array([5.0 + box.pose_xytheta[0] - 2.2, 3.0 + box.pose_xytheta[1] - 2.2, 0.0])
+    sup, con = beam_consistency(box, at_box, views)
+    assert sup > 30 and con <= 0.05 * (sup + con), (sup, con)
+    # the desk turned across the line of sight, one end on the box: beams beside the box went
+    # on where the desk would have stopped them
+    at_desk = np.array([5.0, 3.0 + 0.4, np.pi / 2])
+    sup, con = beam_consistency(desk, at_desk, views)
+    assert con > 0.3 * (sup + con), (sup, con)
+    # beams ending short of the object (something in front) say nothing
+    blocked = room_grid(10, 6, 0.05, boxes=[(4.8, 2.8, 5.2, 3.2), (3.6, 2.0, 3.7, 4.0)])
+    sup, con = beam_consistency(desk, at_desk, _views_of(blocked, [(3.0, 3.0, 0.0)]))
+    assert sup == 0 and con == 0
+
+
+@pytest.mark.parametrize(("beam_check", "relocated"), [(True, False), (False, True)])
+def test_an_absent_desk_is_not_put_onto_a_new_box_that_fits_one_end(beam_check, relocated):
+    # map: a desk at (2.7, 4.55); world: the desk gone, a new box of the desk's width at
+    # (6.25, 2.55). The robot first sees the desk's place empty (confirmed poses), then the box
+    # from poses only the filter vouched for: their rays mark nothing free, but their beams
+    # went on past where the rest of the desk would stand
+    cfg = CFG.model_copy(update={"match_beam_check": beam_check})
+    g = room_grid(10, 6, 0.05, boxes=[(2.0, 4.3, 3.4, 4.8)])
+    world = room_grid(10, 6, 0.05, boxes=[(6.0, 2.3, 6.7, 2.8)])
+    om = ObjectMap.from_grid(g, cfg)
+    desk = [o for o in om.objects if not o.structure][0]
+    m = GatmoMapper(om, g, cfg)
+    m.begin_run(1)
+    events = []
+    path = [((x, 3.6, 0.8), True) for x in np.linspace(1.0, 3.0, 30)]
+    path += [((4.0 + 0.02 * k, 1.2 + 0.01 * k, 0.5), False) for k in range(60)]
+    for i, (pose, verified) in enumerate(path):
+        s = make_scan(world, pose, n_beams=361, max_range_m=4.0, stamp_s=0.1 * i)
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i,
+                           pose_verified=verified)
+    kinds = [e.kind for e in events if e.object_id == desk.id]
+    assert kinds[0] == "absent", kinds
+    assert ("relocated" in kinds) == relocated, kinds
