@@ -100,7 +100,7 @@ def icp_2d(source_xy: np.ndarray, target_xy: np.ndarray, init_xytheta=(0.0, 0.0,
     ev = np.linalg.eigvalsh(H) if n_in else np.zeros(3)
     degenerate = bool(n_in < 6 or ev[0] < degenerate_ratio * max(ev[-1], 1e-12))
     cov = np.eye(3) * 1e6
-    if np.all(np.isfinite(H)):
+    if n_in and np.all(np.isfinite(H)):  # no inliers: nothing known (inf * 0 would be NaN)
         try:
             cov = sigma2 * np.linalg.inv(H + np.eye(3) * 1e-9)
         except np.linalg.LinAlgError:
