@@ -102,6 +102,9 @@ class GatmoConfig(GatmoModel):
     match_max_through_fraction: float = Field(
         0.1, ge=0, le=1, description="of the beams on the placed object or through it, through")
     match_min_edge_fraction: float = Field(0.3, ge=0, le=1)
+    match_free_first: bool = Field(
+        True, description="beyond the paper: of the alignments a partial view allows, the best "
+        "that covers no space seen free (else the best, then refused)")
     match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
     match_max_free_fraction: float = Field(0.05, ge=0, le=1)
     match_edge_sigma_m: float = Field(0.05, gt=0)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from scipy import ndimage
@@ -562,18 +563,34 @@ class GatmoMapper:
                             o.pose_xytheta.tolist(), None))
         self.counts["absent"] += 1
         self._rerender()
-        # order does not matter: an absence may match a chair seen before it
+        # order does not matter: an absence may match a chair seen before it. Beyond the
+        # paper, the chairs (tracks, and Gamma objects seen this run) are tried best fit to
+        # this object first: the first to fit used to take it, often a look-alike's new place
+        fits = []
         for m in self._meta:
-            if o.status != "A":
-                break
             if m.matched_object is None and m.dominant() == "chair":
-                self._try_match(m, stamp_s, events)
-        for g in list(self.object_map.Gamma):
-            if g.id not in self._gamma_this_run:
-                continue  # seen in an earlier run only: no evidence it still stands there
+                pts = m.chair_points()
+                if len(pts) < self.cfg.chair_min_cells:
+                    continue
+                fit = self._fit(m, o, 0, pts, m.chair_points(min_count=1, min_fraction=0.0))
+                if fit is not None:
+                    fits.append((fit[0], len(fits), m, None, None))
+        for g in self.object_map.Gamma:
+            if g.id in self._gamma_this_run:  # seen in an earlier run only: no evidence
+                mt = self._fit_gamma(g, o)
+                if mt is not None:
+                    key = (0, self._at_earlier_pose(o, mt.pose_xytheta),
+                           round(mt.score * 20) / 20,
+                           -np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])))
+                    fits.append((key, len(fits), None, g, mt))
+        for _, _, m, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
             if o.status != "A":
                 break
-            self._try_match_gamma(g, o, stamp_s, events)
+            if m is not None:
+                self._try_match(m, stamp_s, events)  # its best object may be another one
+            elif g in self.object_map.objects:
+                self.object_map.objects.remove(g)
+                self._relocate(o, mt, stamp_s, events)
 
     # ---------------------------------------------------------- metaobjects
     def _track(self, pts, stamp_s, events, verified: bool = True) -> None:
@@ -692,48 +709,56 @@ class GatmoMapper:
             f = self._fields[o.id] = EdgeField(o, self.cfg.match_edge_sigma_m)
         return f
 
+    def _fit(self, m: Metaobject, o: MapObject, tier: int, pts: np.ndarray,
+             everything: np.ndarray) -> tuple[tuple, object] | None:
+        """The chair of track ``m`` (its points ``pts``, every return it had ``everything``)
+        matched to ``o``, a candidate of ``tier`` (:meth:`_candidates`): (ranking key, match)
+        if the match passes every test, else None. Key: tier, at an earlier pose (its prior),
+        score to 0.05, then nearness (look-alikes: the nearest)."""
+        if tier == -1 and m.n_obs < self.cfg.match_patience_scans:
+            return None  # a movable object seen nowhere yet: only once nothing absent fits
+        if _diameter(pts) > _diameter(o.shape_xy) + 3 * o.resolution_m:
+            return None  # what is seen is larger than the object
+        if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
+            return None  # too little of the object seen yet to tell look-alikes apart
+        field = self._field(o)
+        mt = match_points(pts, o, self.cfg, field, prior_yaw=o.pose_xytheta[2],
+                          accept=self._free_accept(o) if self.cfg.match_free_first else None)
+        if mt.score < self.cfg.match_min_score or not self._free_consistent(o, mt):
+            return None
+        # every return the track ever had must fit too, or this is a part of something
+        # larger (a desk's corner looks like a footstool's)
+        R = np.array([[np.cos(mt.pose_xytheta[2]), -np.sin(mt.pose_xytheta[2])],
+                      [np.sin(mt.pose_xytheta[2]), np.cos(mt.pose_xytheta[2])]])
+        if field.score((everything - mt.pose_xytheta[:2]) @ R) < self.cfg.match_min_score - 0.15:
+            return None
+        if self._part_of_larger(o, mt):
+            return None
+        if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m):
+            return None
+        dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
+        # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
+        if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
+            return None
+        earlier = self._at_earlier_pose(o, mt.pose_xytheta)
+        if tier == -2 and not earlier:
+            return None
+        if tier in (1, -2):  # a shift nearby, or back where it stood: as good as doubted
+            tier = 0
+        return (tier, earlier, round(mt.score * 20) / 20, -dist), mt
+
     def _try_match(self, m: Metaobject, stamp_s, events) -> bool:
         pts = m.chair_points()
         if len(pts) < self.cfg.chair_min_cells:
             return False
         best = None
         rivals: list = []
-        diam_p = _diameter(pts)
-        cands = self._candidates(pts)
         everything = m.chair_points(min_count=1, min_fraction=0.0)
-        for tier, o in cands:
-            if tier == -1 and m.n_obs < self.cfg.match_patience_scans:
-                continue  # a movable object seen nowhere yet: only once nothing absent fits
-            if diam_p > _diameter(o.shape_xy) + 3 * o.resolution_m:
-                continue  # what is seen is larger than the object
-            if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
-                continue  # too little of the object seen yet to tell look-alikes apart
-            field = self._field(o)
-            mt = match_points(pts, o, self.cfg, field, prior_yaw=o.pose_xytheta[2])
-            if mt.score < self.cfg.match_min_score or not self._free_consistent(o, mt):
+        for tier, o in self._candidates(pts):
+            fit = self._fit(m, o, tier, pts, everything)
+            if fit is None:
                 continue
-            # every return the track ever had must fit too, or this is a part of something
-            # larger (a desk's corner looks like a footstool's)
-            R = np.array([[np.cos(mt.pose_xytheta[2]), -np.sin(mt.pose_xytheta[2])],
-                          [np.sin(mt.pose_xytheta[2]), np.cos(mt.pose_xytheta[2])]])
-            if field.score((everything - mt.pose_xytheta[:2]) @ R) < \
-                    self.cfg.match_min_score - 0.15:
-                continue
-            if self._part_of_larger(o, mt):
-                continue
-            if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m):
-                continue
-            dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
-            # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
-            if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
-                continue
-            earlier = self._at_earlier_pose(o, mt.pose_xytheta)
-            if tier == -2 and not earlier:
-                continue
-            if tier in (1, -2):  # a shift nearby, or back where it stood: as good as doubted
-                tier = 0
-            # tier first, then an earlier pose (its prior); look-alikes: prefer the nearest
-            key = (tier, earlier, round(mt.score * 20) / 20, -dist)
+            key, mt = fit
             rivals.append((key, o, mt))
             if best is None or key > best[0]:
                 best = (key, o, mt)
@@ -809,14 +834,17 @@ class GatmoMapper:
                                          self.cfg.absence_near_m, own_index=idx)
         return inside + near >= self.cfg.absence_near_min_cells
 
-    def _try_match_gamma(self, g: MapObject, o: MapObject, stamp_s, events) -> None:
-        pts = g.cells_world()
-        mt = match_points(pts, o, self.cfg, self._field(o), prior_yaw=o.pose_xytheta[2])
+    def _fit_gamma(self, g: MapObject, o: MapObject):
+        """The match of ``o`` onto the Gamma object ``g`` (a chair seen, never added), or
+        None if it fails the score, free-space or nearness (small objects) tests."""
+        mt = match_points(g.cells_world(), o, self.cfg, self._field(o),
+                          prior_yaw=o.pose_xytheta[2],
+                          accept=self._free_accept(o) if self.cfg.match_free_first else None)
         if not self._distinctive(o) and self._far(o, mt):
-            return
+            return None
         if mt.score >= self.cfg.match_min_score and self._free_consistent(o, mt):
-            self.object_map.objects.remove(g)
-            self._relocate(o, mt, stamp_s, events)
+            return mt
+        return None
 
     def _far(self, o: MapObject, mt) -> bool:
         """The match ``mt`` puts ``o`` more than ``doubt_search_m`` from where it is."""
@@ -830,6 +858,10 @@ class GatmoMapper:
         only matched near where it was; and a pose error of a few cm is its own size, so rays
         pass through it while it stands there: it is absent only with no returns around it."""
         return len(o.shape_xy) * o.resolution_m**2 >= self.cfg.small_object_area_m2
+
+    def _free_accept(self, o: MapObject):
+        """``pose -> bool``: :meth:`_free_consistent` for ``o`` at a pose (match_points)."""
+        return lambda pose: self._free_consistent(o, SimpleNamespace(pose_xytheta=pose))
 
     def _free_consistent(self, o: MapObject, mt) -> bool:
         """Beyond the paper: the object at the matched pose must not cover cells that rays

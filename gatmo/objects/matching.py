@@ -143,12 +143,15 @@ def candidate_rotations(points_xy: np.ndarray, field: EdgeField) -> np.ndarray:
 
 
 def match_points(points_xy: np.ndarray, obj: MapObject, cfg, field: EdgeField | None = None,
-                 prior_yaw: float | None = None) -> Match:
+                 prior_yaw: float | None = None, accept=None) -> Match:
     """Best pose of ``obj`` explaining world points (P, 2), with its score in [0, 1].
 
     Candidate alignments from lines and principal axes (:func:`candidate_rotations`), each
     searched coarsely (+-6 deg, translations of the object's centroid over its own size around
-    the points' centroid, on the wide field), the best few refined on the sharp field."""
+    the points' centroid, on the wide field), the best few refined on the sharp field.
+    ``accept(pose_xytheta) -> bool`` (beyond the paper): the best refined alignment it accepts
+    (a partial view fits several; the one that covers space seen free is not it), the best of
+    all if it accepts none."""
     field = field or EdgeField(obj, cfg.match_edge_sigma_m)
     pts = np.asarray(points_xy, dtype=float)
     c_p = pts.mean(axis=0)
@@ -170,16 +173,18 @@ def match_points(points_xy: np.ndarray, obj: MapObject, cfg, field: EdgeField | 
             picks.append(cand)
         if len(picks) >= 6:
             break
-    best = (-1.0, np.zeros(3))
     fth = np.radians(np.arange(-3.0, 3.01, 1.0))
     foff = np.arange(-0.1, 0.1 + 1e-9, 0.025)
+    refined = []
     for th0, tx, ty in picks:
         sf = field.score_poses(P - np.array([tx, ty]), th0 + fth, foff)
         r, i, j = np.unravel_index(int(np.argmax(sf)), sf.shape)
-        if sf[r, i, j] > best[0]:
-            best = (float(sf[r, i, j]),
-                    np.array([c_p[0] + tx + foff[i], c_p[1] + ty + foff[j], th0 + fth[r]]))
-    score, pose = best
+        refined.append((float(sf[r, i, j]),
+                        np.array([c_p[0] + tx + foff[i], c_p[1] + ty + foff[j], th0 + fth[r]])))
+    refined.sort(key=lambda x: -x[0])  # stable: ties keep the coarse order
+    score, pose = refined[0] if refined else (-1.0, np.zeros(3))
+    if accept is not None:
+        score, pose = next((x for x in refined if accept(x[1])), (score, pose))
     if prior_yaw is not None:
         pose[2] = _closest_symmetric_yaw(obj, field, pts, pose, prior_yaw, score)
     pose[2] = float(wrap_angle(pose[2]))

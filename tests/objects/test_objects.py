@@ -677,3 +677,47 @@ def test_an_absent_desk_is_not_put_onto_a_new_box_that_fits_one_end(beam_check, 
     kinds = [e.kind for e in events if e.object_id == desk.id]
     assert kinds[0] == "absent", kinds
     assert ("relocated" in kinds) == relocated, kinds
+
+
+def test_an_absence_takes_the_chair_that_fits_it_best_not_the_first_seen():
+    # map: a 0.6 x 0.4 box at the top left; world: the box moved to P (bottom middle), and a
+    # larger 0.7 x 0.45 box stands at Q (bottom right). The robot sees Q first, then P, then
+    # the box's old place empty: both tracks are there when it is marked absent, and the one
+    # that fits it (P) must take it, not the first seen (Q)
+    g = room_grid(12, 6, 0.05, boxes=[(2.0, 4.4, 2.6, 4.8)])
+    world = room_grid(12, 6, 0.05, boxes=[(4.0, 1.0, 4.6, 1.4), (9.0, 1.0, 9.7, 1.45)])
+    om = ObjectMap.from_grid(g, CFG)
+    box = [o for o in om.objects if not o.structure][0]
+    m = GatmoMapper(om, g, CFG)
+    m.begin_run(1)
+    path = [(x, 3.0, -np.pi / 2) for x in np.linspace(9.9, 8.6, 14)]
+    path += [(x, 3.0, -np.pi / 2) for x in np.linspace(8.4, 4.4, 21)]
+    path += [(4.2, 3.0, th) for th in np.linspace(-np.pi / 2, -np.pi, 6)]
+    path += [(x, 3.0, np.pi) for x in np.linspace(4.1, 3.5, 15)]
+    events = _drive(m, world, path, max_range_m=4.0)
+    kinds = [e.kind for e in events if e.object_id == box.id]
+    assert kinds[:2] == ["absent", "relocated"], kinds
+    assert np.hypot(*(box.pose_xytheta[:2] - (4.3, 1.2))) < 0.15, box.pose_xytheta
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_a_partial_view_takes_the_alignment_that_covers_no_free_space(side):
+    """One long side of a desk seen: the desk fits on either side of it. ``accept`` (the
+    mapper passes its free-space test) picks the side it allows, whichever scores first."""
+    from gatmo.objects.objectmap import MapObject
+
+    obj_shape, edge, pose0 = shape_from_points(_box(1.4, 0.7), 0.05)
+    obj = MapObject(1, "desk", "A", pose0, obj_shape, edge, resolution_m=0.05)
+    lo = edge.min(axis=0)
+    side_pts = edge[edge[:, 1] < lo[1] + 0.03]  # the long side at the desk's bottom
+    seen = transform_points(np.array([5.0, 3.0, 0.0]), side_pts)
+    line_y = seen[:, 1].mean()
+
+    def centre_y(pose):
+        return transform_points(pose, obj_shape)[:, 1].mean()
+
+    m = match_points(seen, obj, CFG, prior_yaw=0.0,
+                     accept=lambda pose: side * (centre_y(pose) - line_y) > 0)
+    assert m.score > 0.9
+    assert side * (centre_y(m.pose_xytheta) - line_y) > 0.25
+    assert np.isclose(abs(np.cos(m.pose_xytheta[2])), 1.0, atol=0.02)  # the side stays level

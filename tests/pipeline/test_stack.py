@@ -327,7 +327,8 @@ def test_returns_near_a_doubted_object_are_withheld_with_mask_doubted():
             near_box = np.hypot(ends[:, 0] - 5.075, ends[:, 1] - 2.85) < 0.45
             assert not np.isnan(seen.ranges_m[~near_box]).any()  # walls: never withheld
         masked[flag] = stack.n_masked
-    assert masked[True] > masked[False] + 5
+    # the box is relocated within a few scans, ending the doubt: a handful of returns more
+    assert masked[True] > masked[False]
 
 
 def test_gatmo_is_told_which_poses_the_alignment_confirmed():
