@@ -1,6 +1,7 @@
 """The comparison over many simulated seeds (issues 5 and 6): static localizer vs the full stack
 on rearranged halls and offices, the full stack in the same world before anything moved, and
-GATMO's object figures. Seeds are 100.. (never used while tuning, which used seed 3).
+GATMO's object figures. Seeds 100-119 and 200-209 were never used while tuning (seed 3 and
+seeds 300 on were).
 
     python -m benchmarks.bench_gatmo_sim [--seeds 10] [--preset hall] [--runs 4] [--procs 2]
         [--no-before] [--set fusion.align_to_map=false ...] [--tag NAME]
