@@ -225,6 +225,33 @@ def test_gatmo_waits_after_the_localizer_jumps():
     assert t[52:].all()
 
 
+@pytest.mark.parametrize("check", [True, False])
+def test_gatmo_waits_when_the_localizer_slides_away_from_odometry(check):
+    """A confident filter sliding onto a look-alike place 3 cm per scan (no single jump):
+    with ``slide_check`` GATMO gets no trusted pose once it has slid 0.4 m against odometry
+    within 2 m of travel; without it, every pose is trusted."""
+    grid = room_grid(12, 6, 0.05)
+    truth = np.array([[1.0 + 0.1 * i, 3.0, 0.0] for i in range(80)])
+    scans = [make_scan(grid, p, odom_pose_xytheta=p, stamp_s=0.1 * i)
+             for i, p in enumerate(truth)]
+    slid = truth.copy()
+    slid[30:, 1] += 0.03 * np.arange(1, 51)  # 3 cm sideways per scan from scan 30 on
+    loc = ScriptedLocalizer(slid, confident_at=range(80))
+    fusion = FusionConfig(align_to_map=False, slide_check=check)
+    mapper = RecordingMapper()
+    stack = LocalizationStack(loc, None, mapper, fusion)
+    stack.begin_run(1)
+    for s in scans:
+        stack.step(s)
+    t = np.array(mapper.trusted)
+    assert t[:30].all()  # odometry-consistent, and legitimate jitter below 0.4 m
+    if check:
+        assert t[30:43].all()  # 0.39 m slid by scan 43
+        assert not t[45:].any()
+    else:
+        assert t.all()
+
+
 def _aligner(grid, **kw):
     from gatmo.pipeline.stack import MapAligner
 
