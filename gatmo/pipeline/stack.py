@@ -53,8 +53,9 @@ class FusionConfig(GatmoModel):
     ``settle_after_jump_m`` as after a jump. On seed 208 that keeps the map clean in run 2
     and runs 3-4 are kept (ATE 0.37 / 0.44 m against 1.7 / 8.3 m); on tuning seeds 300-319 it
     is mixed: false relocations 0.61 -> 0.49 per run, but time lost 5.9 % -> 6.3 % and moved
-    pieces found 12.3 % -> 11.4 % (seed 305 kept, 308 lost). Off until a threshold separates
-    a slide from the filter correcting odometry.
+    pieces found 12.3 % -> 11.4 % (seed 305 kept, 308 lost); 0.8 m over 3 m: false
+    relocations 0.50, found 12.3 %, lost 7.9 %. Off until a test separates a slide from the
+    filter correcting odometry.
 
     ``align_to_map``: GATMO's pose is the published one refined by ICP against the current map.
     An alignment that converges with most points matched but moves the pose by more than
