@@ -202,24 +202,31 @@ class RecordingMapper:
         return self._grid
 
 
-def test_gatmo_waits_after_the_localizer_jumps():
-    """A confident filter that has just jumped (recovery, kidnapping) may sit on a look-alike
-    place: GATMO gets no trusted pose for settle_after_jump_m of travel."""
+_STRAIGHT = np.array([[1.0 + 0.1 * i, 3.0, 0.0] for i in range(80)])  # 8 m, odometry exact
+
+
+def _trusted_along_straight(estimates_xytheta, fusion) -> np.ndarray:
+    """(80,) bool: which scans of the drive along ``_STRAIGHT`` the stack trusted enough for
+    GATMO, the filter confident at every scan but reporting ``estimates_xytheta`` (80, 3)."""
     grid = room_grid(12, 6, 0.05)
-    truth = np.array([[1.0 + 0.1 * i, 3.0, 0.0] for i in range(80)])
     scans = [make_scan(grid, p, odom_pose_xytheta=p, stamp_s=0.1 * i)
-             for i, p in enumerate(truth)]
-    loc = ScriptedLocalizer(truth, confident_at=range(80))
-    jumped = truth.copy()
-    jumped[20:, 1] += 2.0  # the estimate jumps 2 m sideways at scan 20, odometry does not
-    loc.truth = jumped
-    fusion = FusionConfig(align_to_map=False, settle_after_jump_m=3.0)
+             for i, p in enumerate(_STRAIGHT)]
     mapper = RecordingMapper()
-    stack = LocalizationStack(loc, None, mapper, fusion)
+    stack = LocalizationStack(ScriptedLocalizer(estimates_xytheta, confident_at=range(80)),
+                              None, mapper, fusion)
     stack.begin_run(1)
     for s in scans:
         stack.step(s)
-    t = np.array(mapper.trusted)
+    return np.array(mapper.trusted)
+
+
+def test_gatmo_waits_after_the_localizer_jumps():
+    """A confident filter that has just jumped (recovery, kidnapping) may sit on a look-alike
+    place: GATMO gets no trusted pose for settle_after_jump_m of travel."""
+    jumped = _STRAIGHT.copy()
+    jumped[20:, 1] += 2.0  # the estimate jumps 2 m sideways at scan 20, odometry does not
+    t = _trusted_along_straight(jumped, FusionConfig(align_to_map=False,
+                                                     settle_after_jump_m=3.0))
     assert t[:20].all()
     assert not t[20:50].any()  # 3 m at 0.1 m per scan
     assert t[52:].all()
@@ -230,20 +237,9 @@ def test_gatmo_waits_when_the_localizer_slides_away_from_odometry(check):
     """A confident filter sliding onto a look-alike place 3 cm per scan (no single jump):
     with ``slide_check`` GATMO gets no trusted pose once it has slid 0.4 m against odometry
     within 2 m of travel; without it, every pose is trusted."""
-    grid = room_grid(12, 6, 0.05)
-    truth = np.array([[1.0 + 0.1 * i, 3.0, 0.0] for i in range(80)])
-    scans = [make_scan(grid, p, odom_pose_xytheta=p, stamp_s=0.1 * i)
-             for i, p in enumerate(truth)]
-    slid = truth.copy()
+    slid = _STRAIGHT.copy()
     slid[30:, 1] += 0.03 * np.arange(1, 51)  # 3 cm sideways per scan from scan 30 on
-    loc = ScriptedLocalizer(slid, confident_at=range(80))
-    fusion = FusionConfig(align_to_map=False, slide_check=check)
-    mapper = RecordingMapper()
-    stack = LocalizationStack(loc, None, mapper, fusion)
-    stack.begin_run(1)
-    for s in scans:
-        stack.step(s)
-    t = np.array(mapper.trusted)
+    t = _trusted_along_straight(slid, FusionConfig(align_to_map=False, slide_check=check))
     assert t[:30].all()  # odometry-consistent, and legitimate jitter below 0.4 m
     if check:
         assert t[30:43].all()  # 0.39 m slid by scan 43
