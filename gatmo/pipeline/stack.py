@@ -267,10 +267,11 @@ class LocalizationStack:
             self.mapper.begin_run(run_id)
 
     def _slid(self, loc_pose: np.ndarray, odom: np.ndarray) -> bool:
-        """The filter's pose moved more than ``slide_max_m`` against odometry over the last
-        ``slide_window_m`` of travel (the oldest kept sample within that window)."""
+        """The filter's pose moved more than ``slide_max_m`` against odometry since the newest
+        sample at least ``slide_window_m`` of travel back."""
         q = self._slide
-        q.append((self._travel_m, loc_pose, odom))
+        if not q or self._travel_m - q[-1][0] >= 0.05:  # a sample per 5 cm: bounded when still
+            q.append((self._travel_m, loc_pose, odom))
         while len(q) > 1 and self._travel_m - q[1][0] >= self.fusion.slide_window_m:
             q.popleft()
         travel0, loc0, odom0 = q[0]
