@@ -55,6 +55,13 @@ class Event:
         return dict(self.__dict__)
 
 
+def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
+    """How a match ``mt`` of ``o`` ranks among others: tier first, then at an earlier pose (its
+    prior), the score to 0.05, then nearness to where ``o`` is (look-alikes: the nearest)."""
+    return (tier, earlier, round(mt.score * 20) / 20,
+            -float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))))
+
+
 def _diameter(points_xy: np.ndarray) -> float:
     """Largest distance between two points of a set (P, 2) [m]."""
     if len(points_xy) < 2:
@@ -569,19 +576,15 @@ class GatmoMapper:
         fits = []
         for m in self._meta:
             if m.matched_object is None and m.dominant() == "chair":
-                pts = m.chair_points()
-                if len(pts) < self.cfg.chair_min_cells:
-                    continue
-                fit = self._fit(m, o, 0, pts, m.chair_points(min_count=1, min_fraction=0.0))
+                view = self._chair_view(m)
+                fit = None if view is None else self._fit(m, o, 0, view)
                 if fit is not None:
                     fits.append((fit[0], len(fits), m, None, None))
         for g in self.object_map.Gamma:
             if g.id in self._gamma_this_run:  # seen in an earlier run only: no evidence
                 mt = self._fit_gamma(g, o)
                 if mt is not None:
-                    key = (0, self._at_earlier_pose(o, mt.pose_xytheta),
-                           round(mt.score * 20) / 20,
-                           -np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])))
+                    key = _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta))
                     fits.append((key, len(fits), None, g, mt))
         for _, _, m, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
             if o.status != "A":
@@ -709,15 +712,23 @@ class GatmoMapper:
             f = self._fields[o.id] = EdgeField(o, self.cfg.match_edge_sigma_m)
         return f
 
-    def _fit(self, m: Metaobject, o: MapObject, tier: int, pts: np.ndarray,
-             everything: np.ndarray) -> tuple[tuple, object] | None:
-        """The chair of track ``m`` (its points ``pts``, every return it had ``everything``)
-        matched to ``o``, a candidate of ``tier`` (:meth:`_candidates`): (ranking key, match)
-        if the match passes every test, else None. Key: tier, at an earlier pose (its prior),
-        score to 0.05, then nearness (look-alikes: the nearest)."""
+    def _chair_view(self, m: Metaobject) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """(chair points, every return the track had, the chair's diameter [m]) of track
+        ``m``, or None while it has fewer than ``chair_min_cells`` chair cells."""
+        pts = m.chair_points()
+        if len(pts) < self.cfg.chair_min_cells:
+            return None
+        return pts, m.chair_points(min_count=1, min_fraction=0.0), _diameter(pts)
+
+    def _fit(self, m: Metaobject, o: MapObject, tier: int,
+             view: tuple[np.ndarray, np.ndarray, float]) -> tuple[tuple, object] | None:
+        """The chair of track ``m`` (its :meth:`_chair_view`) matched to ``o``, a candidate of
+        ``tier`` (:meth:`_candidates`): (:func:`_rank_key`, match) if the match passes every
+        test, else None."""
+        pts, everything, diam_p = view
         if tier == -1 and m.n_obs < self.cfg.match_patience_scans:
             return None  # a movable object seen nowhere yet: only once nothing absent fits
-        if _diameter(pts) > _diameter(o.shape_xy) + 3 * o.resolution_m:
+        if diam_p > _diameter(o.shape_xy) + 3 * o.resolution_m:
             return None  # what is seen is larger than the object
         if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
             return None  # too little of the object seen yet to tell look-alikes apart
@@ -736,7 +747,6 @@ class GatmoMapper:
             return None
         if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m):
             return None
-        dist = np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
         # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
         if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
             return None
@@ -745,17 +755,16 @@ class GatmoMapper:
             return None
         if tier in (1, -2):  # a shift nearby, or back where it stood: as good as doubted
             tier = 0
-        return (tier, earlier, round(mt.score * 20) / 20, -dist), mt
+        return _rank_key(o, mt, tier, earlier), mt
 
     def _try_match(self, m: Metaobject, stamp_s, events) -> bool:
-        pts = m.chair_points()
-        if len(pts) < self.cfg.chair_min_cells:
+        view = self._chair_view(m)
+        if view is None:
             return False
         best = None
         rivals: list = []
-        everything = m.chair_points(min_count=1, min_fraction=0.0)
-        for tier, o in self._candidates(pts):
-            fit = self._fit(m, o, tier, pts, everything)
+        for tier, o in self._candidates(view[0]):
+            fit = self._fit(m, o, tier, view)
             if fit is None:
                 continue
             key, mt = fit
