@@ -31,6 +31,22 @@ class AmclConfig(GatmoModel):
     selective_resampling: bool = False
     recovery_alpha_slow: float = Field(0.0, ge=0, le=1)
     recovery_alpha_fast: float = Field(0.0, ge=0, le=1)
+    recovery_per_beam: bool = Field(
+        True,
+        description="not an AMCL parameter: the recovery averages (w_slow / w_fast) take the "
+        "measurement likelihood per beam (the geometric mean over the beams weighed). The "
+        "likelihood of a scan is a product over its beams, and their number changes from scan "
+        "to scan (max-range beams drop out: 5 to 35 of 60 in a hall with a 4 m laser), so the "
+        "raw average falls with every beam added and, driving towards a wall, injected 80 % "
+        "random particles into a robot tracked to 0.1 m; false = AMCL")
+    recovery_max_unmapped_fraction: float = Field(
+        0.1, ge=0, le=1,
+        description="not an AMCL parameter, with recovery on (recovery_alpha_slow/fast) and "
+        "skip_unmapped_beams: an update that left out more than this fraction of its beams as "
+        "ending in unmapped space neither updates w_slow / w_fast nor injects random "
+        "particles. By a door out of the map or beyond it the mapped beams are few and their "
+        "likelihood drops without the robot being lost, and particles injected then lock onto "
+        "look-alike places of the map while the robot is outside it; 1 = AMCL")
     min_ess_fraction: float = Field(
         0.0, ge=0, le=1,
         description="not an AMCL parameter: when one update's weights would leave fewer than "

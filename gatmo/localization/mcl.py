@@ -236,7 +236,9 @@ class MonteCarloLocalizer:
             if n_beams == 0:
                 self.stats.skipped_no_valid_beams += 1
             else:
-                self._weigh_and_resample(logw)
+                unmapped = getattr(self.sensor, "last_unmapped_beams", 0)
+                self._weigh_and_resample(logw, n_beams, recovery=unmapped <= (
+                    c.recovery_max_unmapped_fraction * (unmapped + n_beams)))
                 updated = True
                 self._force_update = False
                 self.stats.sensor_updates += 1
@@ -252,7 +254,10 @@ class MonteCarloLocalizer:
         return bool(self.grid.in_bounds(cell)[0]) and \
             self.grid.cells[cell[0, 1], cell[0, 0]] != OCCUPIED
 
-    def _weigh_and_resample(self, logw: np.ndarray) -> None:
+    def _weigh_and_resample(self, logw: np.ndarray, n_beams: int = 1,
+                            recovery: bool = True) -> None:
+        """Weigh by ``logw`` (N,), the log-likelihoods of ``n_beams`` beams, and resample;
+        ``recovery``: this update may feed the recovery averages and inject random particles."""
         c = self.cfg
         if c.min_ess_fraction > 0:
             beta = tempering_factor(logw, self.weights, c.min_ess_fraction * len(logw))
@@ -265,16 +270,20 @@ class MonteCarloLocalizer:
         total = w.sum()
         if total <= 0 or not np.isfinite(total):
             w = np.full(len(w), 1.0 / len(w))
-            total_raw = 0.0
+            log_total = -np.inf
         else:
-            total_raw = total * np.exp(m)
+            log_total = float(np.log(total)) + m
             w = w / total
         self.weights = w
-        if c.recovery_alpha_slow > 0 or c.recovery_alpha_fast > 0:
+        if recovery and (c.recovery_alpha_slow > 0 or c.recovery_alpha_fast > 0):
             # Prob. Rob. p. 258: the average measurement likelihood. AMCL divides the weighted
             # sum by N once more, which makes the averages jump whenever KLD changes N; the
             # weighted mean is N-independent.
-            w_avg = total_raw if np.isfinite(total_raw) else 0.0
+            w_avg = float(np.exp(log_total)) if np.isfinite(log_total) else 0.0
+            if c.recovery_per_beam and c.laser_model == "likelihood_field":
+                w_avg = max(w_avg - 1.0, 0.0) / max(n_beams, 1)  # p = 1 + sum of pz^3
+            elif c.recovery_per_beam:  # p = product over the beams: the geometric mean
+                w_avg = float(np.exp(log_total / max(n_beams, 1))) if w_avg > 0.0 else 0.0
             if self.w_slow == 0.0:
                 self.w_slow = w_avg
             else:
@@ -292,7 +301,7 @@ class MonteCarloLocalizer:
         new = kld_resample(self.particles, w, self.rng, err=c.kld_err, z=c.kld_z,
                            min_n=c.min_particles, max_n=c.max_particles)
         p_inject = 0.0
-        if self.w_slow > 0:
+        if recovery and self.w_slow > 0:
             p_inject = max(0.0, 1.0 - self.w_fast / self.w_slow)
         if p_inject > 0:
             inject = self.rng.random(len(new)) < p_inject
