@@ -48,6 +48,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
     res = compare(scen.map_yaml, scen.logs, tmp / f"c{seed}", scenario_json=scen.scenario_json,
                   config=stack_config(overrides), pictures=False, keep_traces=True)
     outcomes = piece_outcomes(scen, res, tmp / f"c{seed}")
+    census = last_census(scen, tmp / f"c{seed}")
     secs = time.perf_counter() - t0
     before_ate_m = float("nan")
     if before:  # the same world before anything moved: same seed, no rearrangement
@@ -79,6 +80,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
         "twin_relocations": sum(x.get("obj_twin_relocations", 0) for x in g),
         "false_absences": sum(x.get("obj_false_absences", 0) for x in g),
         "map_correct_last": g[-1].get("obj_map_correct_fraction", float("nan")),
+        **{f"last_{k}": v for k, v in census.items()},
         "gatmo_ms_per_scan": res.overall["gatmo"]["ms_per_scan"],
         "static_ms_per_scan": res.overall["static"]["ms_per_scan"],
         "compare_s": secs,
@@ -120,6 +122,17 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
                         "scan": rel[-1]["scan_index"] if rel else None})
         prev = cur
     return out
+
+
+def last_census(scen, cmp_dir: Path) -> dict:
+    """:func:`~gatmo.pipeline.evaluate.map_census` of the full stack's object map after the
+    last run."""
+    from gatmo.maps.object_io import load_objects
+    from gatmo.pipeline.evaluate import map_census, tie_objects
+
+    doc = json.loads(Path(scen.scenario_json).read_text())
+    om = load_objects(sorted((cmp_dir / "gatmo").glob("*"))[-1] / "objects.json")
+    return map_census(om, tie_objects(om, doc), doc, len(doc["runs"]))
 
 
 def table_ii(rows: list[dict]) -> dict:
@@ -195,6 +208,11 @@ def main(argv=None) -> int:
         "false_relocations_per_run": float(a["false_relocations"].sum() / (len(rows) * args.runs)),
         "twin_relocations_per_run": float(a["twin_relocations"].sum() / (len(rows) * args.runs)),
         "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * args.runs)),
+        # after the last run, per seed: objects on pieces, second objects on a piece, objects
+        # where no piece stands, pieces no object stands on (map_census)
+        "last_run_census_per_seed": {k: float(a[f"last_{k}"].mean()) for k in
+                                     ("pieces", "on_piece", "duplicate", "stale", "fixed",
+                                      "pieces_unmapped")},
         "gatmo_ms_per_scan": float(a["gatmo_ms_per_scan"].mean()),
         "static_ms_per_scan": float(a["static_ms_per_scan"].mean()),
     }

@@ -32,7 +32,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
-    from gatmo.pipeline.evaluate import score_run, tie_objects
+    from gatmo.pipeline.evaluate import map_census, score_run, tie_objects
     from gatmo.pipeline.runs import make_localizer, make_matcher
     from gatmo.pipeline.stack import LocalizationStack
 
@@ -84,6 +84,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
             "moved": score["moved"], "found": score["found"],
             "false_relocations": score["false_relocations"],
             "map_correct_fraction": score["map_correct_fraction"],
+            **map_census(om, ties, doc, k + 1),
         })
     return rows
 
@@ -110,7 +111,8 @@ def summary(rows: list[dict], first: int = 10) -> dict:
             "false_relocations": int(sum(r["false_relocations"] for r in sel)),
             "map_correct_fraction": float(np.mean([r["map_correct_fraction"] for r in sel])),
         }
-    for k in ("objects_placed", "pieces_in_world", "objects_total", "peak_rss_mb"):
+    for k in ("objects_placed", "pieces_in_world", "objects_total", "peak_rss_mb", "on_piece",
+              "duplicate", "stale", "fixed", "pieces_unmapped"):
         out[k] = [rows[0][k], rows[-1][k]]
     ms = [r["ms_per_scan"] for r in rows]
     out["ms_per_scan_min_max"] = [float(min(ms)), float(max(ms))]

@@ -150,6 +150,47 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     }
 
 
+def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
+               near_m: float = 0.1) -> dict:
+    """What the objects placed in the map (U, M; walls left out) stand on after run ``run``
+    (1-based), against the pieces of that run's layout. An object stands on a piece when at
+    least half of its cells lie within ``near_m`` of the piece's footprint (the piece it covers
+    most). Per piece the first object on it counts as ``on_piece`` (its own, when that is one
+    of them) and the rest as ``duplicate``; an object on no piece is ``fixed`` when it is tied
+    to none and still at its pose in the static map (a column), else ``stale`` (left where a
+    piece stood, or made of nothing). ``pieces_unmapped``: pieces no object stands on."""
+    res = scenario.get("resolution_m", 0.05)
+    layout = scenario["runs"][run - 1]["objects"]
+    trees = {p["id"]: cKDTree(transform_points(np.array(p["pose"], dtype=float),
+                                               _piece_points(p, res)))
+             for p in layout}
+    on: dict[int, list[int]] = {}
+    out = {"on_piece": 0, "duplicate": 0, "stale": 0, "fixed": 0}
+    for o in object_map.placed():
+        if o.structure:
+            continue
+        pts = o.cells_world()
+        best, best_n = None, 0.5 * len(pts)
+        for pid, tree in trees.items():
+            d, _ = tree.query(pts, distance_upper_bound=near_m)
+            n = int(np.isfinite(d).sum())
+            if n >= best_n:
+                best, best_n = pid, n
+        if best is not None:
+            on.setdefault(best, []).append(o.id)
+        elif (o.id not in ties and o.base_pose_xytheta is not None
+              and np.allclose(o.pose_xytheta, o.base_pose_xytheta)):
+            out["fixed"] += 1
+        else:
+            out["stale"] += 1
+    for ids in on.values():
+        out["on_piece"] += 1
+        out["duplicate"] += len(ids) - 1
+    out["pieces"] = len(layout)
+    out["pieces_unmapped"] = len(layout) - len(on)
+    return out
+
+
 def expected_pose(o, piece_id: int, layout0: list[dict], layout: list[dict]):
     """Where the object's frame must be if it followed its piece from L0 to this layout."""
     p0 = true_pose_of(piece_id, layout0)

@@ -97,3 +97,29 @@ def test_observed_tells_whether_the_old_place_was_seen_through_and_the_new_one_s
              for _ in range(5)]
     assert observed(short, old, new) == "old"
     assert observed(scans, old, None) == "old"  # removed
+
+
+def test_map_census_counts_duplicates_stale_objects_and_unmapped_pieces():
+    from gatmo.objects.objectmap import ObjectMap
+    from gatmo.pipeline.evaluate import map_census
+
+    def obj(oid, pose, base):
+        o = _box_object(pose)
+        o.id, o.base_pose_xytheta = oid, np.array(base, float)
+        return o
+
+    layout = [_piece(7, [2.0, 4.0, 0.0]), _piece(8, [5.0, 3.0, 0.0]), _piece(9, [8.0, 1.0, 0.0])]
+    om = ObjectMap([obj(1, [2.0, 4.0, 0.0], [2.0, 1.0, 0.0]),  # its piece 7, moved there
+                    obj(2, [2.02, 4.0, 0.0], [0.0, 0.0, 0.0]),  # added again on piece 7
+                    obj(3, [5.0, 3.0, 0.0], [6.0, 1.0, 0.0]),  # on piece 8
+                    obj(4, [6.0, 1.0, 0.0], [6.0, 1.0, 0.0]),  # tied, left where 8 stood
+                    obj(5, [3.0, 6.0, 0.0], [3.0, 6.0, 0.0])],  # untied, never moved
+                   0.05)
+    om.objects[3].status = "U"
+    gone = obj(6, [8.0, 1.0, 0.0], [8.0, 1.0, 0.0])
+    gone.status = "A"  # absent: not in the map, piece 9 is unmapped
+    om.objects.append(gone)
+    scen = {"runs": [{"objects": layout}]}
+    c = map_census(om, {1: 7, 3: 8, 4: 8, 6: 9}, scen, 1)
+    assert c == {"on_piece": 2, "duplicate": 1, "stale": 1, "fixed": 1, "pieces": 3,
+                 "pieces_unmapped": 1}
