@@ -1,5 +1,6 @@
 """Soak (issue 7): many consecutive simulated runs with the object map carried over, the
-furniture rearranged every time. Per run: objects placed in the map vs pieces in the world,
+furniture rearranged every time. Per run: objects placed in the map vs pieces in the world
+and what those objects stand on (``map_census``: a piece, a second object on a piece, nothing),
 peak RSS, ms per scan, localization error (and the static-map localizer's on the same log,
 the peer), and the relocations (moved pieces found with their
 id at the true pose, false relocations, the fraction of the map's pieces placed right). What
