@@ -72,7 +72,12 @@ class GatmoConfig(GatmoModel):
     person_accel_std: float = Field(1.5, gt=0)
     person_meas_std_m: float = Field(0.1, gt=0)
     # chair hypothesis (evidence grid)
-    chair_min_scans: int = Field(6, ge=1)
+    chair_min_scans: int = Field(
+        9, ge=1, description="scans before a track can be a chair (be matched, join Gamma). At "
+        "6, 19 of 45 wrong relocations with true poses (tuning seeds 300-309) came at the first "
+        "try, a small piece onto part of a larger one seen from one side; at 9 (the paper: 10 "
+        "to 70 scans to identify) false relocations per run fall 0.61 -> 0.40 (full stack, "
+        "seeds 300-319) and 0.60 -> 0.45 (true poses, held-out seeds 100-109)")
     chair_min_cells: int = Field(6, ge=1)
     chair_max_speed_mps: float = Field(0.15, gt=0)
     chair_align_cells: int = Field(
