@@ -155,8 +155,8 @@ def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
     """What the objects placed in the map (U, M; walls left out) stand on after run ``run``
     (1-based), against the pieces of that run's layout. An object stands on a piece when at
     least half of its cells lie within ``near_m`` of the piece's footprint (the piece it covers
-    most). Per piece the first object on it counts as ``on_piece`` (its own, when that is one
-    of them) and the rest as ``duplicate``; an object on no piece is ``fixed`` when it is tied
+    most). Per piece one object on it counts as ``on_piece`` and the rest as ``duplicate``
+    (which object, its own or another's, is not asked); an object on no piece is ``fixed`` when it is tied
     to none and still at its pose in the static map (a column), else ``stale`` (left where a
     piece stood, or made of nothing). ``pieces_unmapped``: pieces no object stands on."""
     res = scenario.get("resolution_m", 0.05)
