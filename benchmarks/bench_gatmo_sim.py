@@ -194,6 +194,8 @@ def main(argv=None) -> int:
                 rows.append(row)
                 print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
                                for k, v in row.items() if k != "outcomes"), flush=True)
+    from gatmo.pipeline.evaluate import CENSUS_KEYS
+
     a = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0] if k != "outcomes"}
     total = {
         "preset": args.preset, "seeds": len(rows), "overrides": args.set,
@@ -210,9 +212,7 @@ def main(argv=None) -> int:
         "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * args.runs)),
         # after the last run, per seed: objects on pieces, second objects on a piece, objects
         # where no piece stands, pieces no object stands on (map_census)
-        "last_run_census_per_seed": {k: float(a[f"last_{k}"].mean()) for k in
-                                     ("pieces", "on_piece", "duplicate", "stale", "fixed",
-                                      "pieces_unmapped")},
+        "last_run_census_per_seed": {k: float(a[f"last_{k}"].mean()) for k in CENSUS_KEYS},
         "gatmo_ms_per_scan": float(a["gatmo_ms_per_scan"].mean()),
         "static_ms_per_scan": float(a["static_ms_per_scan"].mean()),
     }

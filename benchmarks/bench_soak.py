@@ -112,8 +112,10 @@ def summary(rows: list[dict], first: int = 10) -> dict:
             "false_relocations": int(sum(r["false_relocations"] for r in sel)),
             "map_correct_fraction": float(np.mean([r["map_correct_fraction"] for r in sel])),
         }
-    for k in ("objects_placed", "pieces_in_world", "objects_total", "peak_rss_mb", "on_piece",
-              "duplicate", "stale", "fixed", "pieces_unmapped"):
+    from gatmo.pipeline.evaluate import CENSUS_KEYS
+
+    for k in ("objects_placed", "pieces_in_world", "objects_total", "peak_rss_mb",
+              *CENSUS_KEYS[1:]):
         out[k] = [rows[0][k], rows[-1][k]]
     ms = [r["ms_per_scan"] for r in rows]
     out["ms_per_scan_min_max"] = [float(min(ms)), float(max(ms))]

@@ -225,7 +225,8 @@ class MonteCarloLocalizer:
             gate = (self._converged or self._coast_m > 0.0) and self._coast_m < c.max_coast_m
             logw, n_beams = self.sensor.weigh(moved, scan, self._converged,
                                               gate_unexplained=gate)
-            self.stats.unmapped_beams += getattr(self.sensor, "last_unmapped_beams", 0)
+            unmapped = getattr(self.sensor, "last_unmapped_beams", 0)
+            self.stats.unmapped_beams += unmapped
             if getattr(self.sensor, "last_gated", False):
                 self.stats.unexplained_skipped += 1
                 self._coast_m += float(np.hypot(delta[0], delta[1]))
@@ -236,7 +237,6 @@ class MonteCarloLocalizer:
             if n_beams == 0:
                 self.stats.skipped_no_valid_beams += 1
             else:
-                unmapped = getattr(self.sensor, "last_unmapped_beams", 0)
                 self._weigh_and_resample(logw, n_beams, recovery=unmapped <= (
                     c.recovery_max_unmapped_fraction * (unmapped + n_beams)))
                 updated = True

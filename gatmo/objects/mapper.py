@@ -29,7 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from gatmo.datasets.types import Scan
-from gatmo.geometry import compose, transform_points
+from gatmo.geometry import compose, inverse, transform_points
 from gatmo.maps.grid import FREE, OccupancyGrid
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
@@ -732,16 +732,13 @@ class GatmoMapper:
             return None  # what is seen is larger than the object
         if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
             return None  # too little of the object seen yet to tell look-alikes apart
-        field = self._field(o)
-        mt = match_points(pts, o, self.cfg, field, prior_yaw=o.pose_xytheta[2],
-                          accept=self._free_accept(o) if self.cfg.match_free_first else None)
+        mt = self._match(pts, o)
         if mt.score < self.cfg.match_min_score or not self._free_consistent(o, mt):
             return None
         # every return the track ever had must fit too, or this is a part of something
         # larger (a desk's corner looks like a footstool's)
-        R = np.array([[np.cos(mt.pose_xytheta[2]), -np.sin(mt.pose_xytheta[2])],
-                      [np.sin(mt.pose_xytheta[2]), np.cos(mt.pose_xytheta[2])]])
-        if field.score((everything - mt.pose_xytheta[:2]) @ R) < self.cfg.match_min_score - 0.15:
+        local = transform_points(inverse(mt.pose_xytheta), everything)
+        if self._field(o).score(local) < self.cfg.match_min_score - 0.15:
             return None
         if self._part_of_larger(o, mt):
             return None
@@ -843,12 +840,16 @@ class GatmoMapper:
                                          self.cfg.absence_near_m, own_index=idx)
         return inside + near >= self.cfg.absence_near_min_cells
 
+    def _match(self, pts: np.ndarray, o: MapObject):
+        """``o`` matched onto the chair points ``pts`` (P, 2) (map frame): its edge field,
+        its yaw as the prior, and with ``match_free_first`` the free-space test choosing."""
+        return match_points(pts, o, self.cfg, self._field(o), prior_yaw=o.pose_xytheta[2],
+                            accept=self._free_accept(o) if self.cfg.match_free_first else None)
+
     def _fit_gamma(self, g: MapObject, o: MapObject):
         """The match of ``o`` onto the Gamma object ``g`` (a chair seen, never added), or
         None if it fails the score, free-space or nearness (small objects) tests."""
-        mt = match_points(g.cells_world(), o, self.cfg, self._field(o),
-                          prior_yaw=o.pose_xytheta[2],
-                          accept=self._free_accept(o) if self.cfg.match_free_first else None)
+        mt = self._match(g.cells_world(), o)
         if not self._distinctive(o) and self._far(o, mt):
             return None
         if mt.score >= self.cfg.match_min_score and self._free_consistent(o, mt):

@@ -150,15 +150,20 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     }
 
 
+#: the counts :func:`map_census` returns
+CENSUS_KEYS = ("pieces", "on_piece", "duplicate", "stale", "fixed", "pieces_unmapped")
+
+
 def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
                near_m: float = 0.1) -> dict:
     """What the objects placed in the map (U, M; walls left out) stand on after run ``run``
     (1-based), against the pieces of that run's layout. An object stands on a piece when at
     least half of its cells lie within ``near_m`` of the piece's footprint (the piece it covers
     most). Per piece one object on it counts as ``on_piece`` and the rest as ``duplicate``
-    (which object, its own or another's, is not asked); an object on no piece is ``fixed`` when it is tied
-    to none and still at its pose in the static map (a column), else ``stale`` (left where a
-    piece stood, or made of nothing). ``pieces_unmapped``: pieces no object stands on."""
+    (which object, its own or another's, is not asked); an object on no piece is ``fixed``
+    when it is tied to none and still at its pose in the static map (a column), else
+    ``stale`` (left where a piece stood, or made of nothing). ``pieces_unmapped``: pieces no
+    object stands on."""
     res = scenario.get("resolution_m", 0.05)
     layout = scenario["runs"][run - 1]["objects"]
     trees = {p["id"]: cKDTree(transform_points(np.array(p["pose"], dtype=float),
