@@ -49,6 +49,10 @@ class GatmoConfig(GatmoModel):
     absence_from_verified_only: bool = Field(
         True, description="rays seen through objects count only from poses an independent "
         "check confirmed (pose_verified); other poses' returns still show objects there")
+    track_from_verified_only: bool = Field(
+        False, description="unexplained returns feed the tracks (and so the chair grids and "
+        "matches) only from poses an independent check confirmed (pose_verified); other "
+        "poses' returns still count as unexplained")
     agreement_gone_min_beams: int = Field(
         3, ge=1, description="an object this scan sees through with at least this many beams")
     agreement_gone_fraction: float = Field(

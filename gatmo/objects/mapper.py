@@ -309,8 +309,9 @@ class GatmoMapper:
         self._view = (lp, scan.angles_rad, scan.ranges_m,
                       min(scan.range_max_m, self.cfg.absence_max_range_m)
                       - self.cfg.match_through_m)
-        self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
-                    verified=bool(pose_verified))
+        if pose_verified or not self.cfg.track_from_verified_only:
+            self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
+                        verified=bool(pose_verified))
         self._expire(stamp_s, events)
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events

@@ -29,7 +29,7 @@ from pydantic import Field
 
 from gatmo.config import GatmoModel
 from gatmo.datasets.types import Scan
-from gatmo.geometry import compose, inverse, relative, wrap_angle
+from gatmo.geometry import compose, inverse, relative, transform_points, wrap_angle
 from gatmo.maps.grid import OccupancyGrid
 
 
@@ -72,6 +72,12 @@ class FusionConfig(GatmoModel):
     median ATE ratio to the static localizer 0.36 instead of 0.89 and time lost 4.7 % instead
     of 10.2 %, but false relocations 1.25 per run instead of 0.53 and moved pieces found 9.4 %
     instead of 11.7 %: GATMO needs a pose better than the alignment's check guarantees.
+    The alignment runs at most ``align_max_iter`` Gauss-Newton steps with ``align_kernel``
+    weights at ``align_kernel_scale_m``: ``geman_mcclure`` (redescending, as kiss-icp) lets
+    furniture moved by less than the 0.3 m correspondence gate drop out instead of pulling the
+    pose towards where it stood. ``align_min_tight_fraction`` (0 = off): a converged alignment
+    also needs this fraction of the scan's points within ``align_tight_m`` of a map edge, else
+    it is inconclusive; a fit that is loose everywhere agrees with the map only roughly.
 
     ``gatmo_pose_gain`` (1 = off): the pose handed to GATMO follows the matcher's (or, without
     it, odometry's) increment from the last pose it was handed on the scan before, and moves
@@ -117,6 +123,11 @@ class FusionConfig(GatmoModel):
     align_max_correction_m: float = 0.15
     align_max_correction_deg: float = 5.0
     align_inconclusive: Literal["filter_pose", "skip"] = "filter_pose"
+    align_kernel: Literal["huber", "geman_mcclure"] = "huber"
+    align_kernel_scale_m: float = Field(0.05, gt=0)
+    align_max_iter: int = Field(15, ge=1)
+    align_tight_m: float = Field(0.05, gt=0)
+    align_min_tight_fraction: float = Field(0.0, ge=0, le=1)
     verified_suffices: bool = False
     mask_unexplained: bool = True
     mask_doubted: bool = False
@@ -168,9 +179,15 @@ class MapAligner:
         if len(pts) < 20:
             return inconclusive
         res = icp_2d(pts, self._pts, pose_xytheta, target_tree=self._tree,
-                     target_normals=self._normals, max_corr_dist_m=0.3, max_iter=15)
+                     target_normals=self._normals, max_corr_dist_m=0.3, max_iter=f.align_max_iter,
+                     kernel=f.align_kernel, kernel_scale_m=f.align_kernel_scale_m)
         if not res.converged or res.degenerate or res.fitness < f.align_min_fitness:
             return inconclusive
+        if f.align_min_tight_fraction > 0:
+            d, _ = self._tree.query(transform_points(res.T_target_source, pts),
+                                    distance_upper_bound=f.align_tight_m)
+            if np.mean(np.isfinite(d)) < f.align_min_tight_fraction:
+                return inconclusive
         corr = relative(pose_xytheta, res.T_target_source)
         ok = (np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
               and abs(corr[2]) <= np.radians(f.align_max_correction_deg))

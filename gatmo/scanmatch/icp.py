@@ -1,5 +1,5 @@
-"""2D point-to-line ICP: KD-tree correspondences, normals from neighbours, Huber weights,
-Gauss-Newton on SE(2), covariance from the Hessian and a degeneracy flag."""
+"""2D point-to-line ICP: KD-tree correspondences, normals from neighbours, Huber or
+Geman-McClure weights, Gauss-Newton on SE(2), covariance from the Hessian and a degeneracy flag."""
 
 from __future__ import annotations
 
@@ -51,8 +51,15 @@ def icp_2d(source_xy: np.ndarray, target_xy: np.ndarray, init_xytheta=(0.0, 0.0,
            target_tree: cKDTree | None = None, target_normals: np.ndarray | None = None,
            max_corr_dist_m: float = 0.5, max_iter: int = 30, kernel_scale_m: float = 0.05,
            tol_xy_m: float = 1e-4, tol_theta_rad: float = 1e-5,
-           degenerate_ratio: float = 1e-3) -> IcpResult:
-    """Align ``source_xy`` (N, 2) to ``target_xy`` (M, 2) from ``init_xytheta``."""
+           degenerate_ratio: float = 1e-3, kernel: str = "huber") -> IcpResult:
+    """Align ``source_xy`` (N, 2) to ``target_xy`` (M, 2) from ``init_xytheta``.
+
+    ``kernel``: ``huber`` (a residual beyond ``kernel_scale_m`` pulls with a constant force) or
+    ``geman_mcclure`` (redescending, as kiss-icp: a residual several ``kernel_scale_m`` long
+    pulls almost not at all, so points on something that moved by less than
+    ``max_corr_dist_m`` do not drag the alignment towards where it stood)."""
+    if kernel not in ("huber", "geman_mcclure"):
+        raise ValueError(f"kernel must be 'huber' or 'geman_mcclure', not {kernel!r}")
     T = np.asarray(init_xytheta, dtype=float).copy()
     tree = target_tree or cKDTree(target_xy)
     if target_normals is None:
@@ -82,7 +89,10 @@ def icp_2d(source_xy: np.ndarray, target_xy: np.ndarray, init_xytheta=(0.0, 0.0,
         src = source_xy[inl_idx]
         dp = np.stack([-s * src[:, 0] - c * src[:, 1], c * src[:, 0] - s * src[:, 1]], axis=1)
         J = np.column_stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", n, dp)])
-        w = kernel_scale_m / np.maximum(np.abs(r), kernel_scale_m)  # Huber weights
+        if kernel == "huber":
+            w = kernel_scale_m / np.maximum(np.abs(r), kernel_scale_m)
+        else:
+            w = (kernel_scale_m**2 / (kernel_scale_m**2 + r**2)) ** 2
         H = (J * w[:, None]).T @ J
         g = (J * w[:, None]).T @ r
         try:

@@ -427,3 +427,21 @@ def test_gatmo_pose_gain_averages_the_alignment_jitter_out(gain):
     # a pose the alignment moved further than it may correct restarts the filter there
     far = true[-1] + [0.5, 0.0, 0.0]
     np.testing.assert_allclose(stack._smoothed(far, compose(T_local_map, true[-1])), far)
+
+
+@pytest.mark.parametrize("min_tight, verified", [(0.0, True), (0.9, False)])
+def test_an_alignment_loose_everywhere_is_inconclusive_with_align_min_tight_fraction(
+        min_tight, verified):
+    """Every box stands 0.12 m east of where the map has it: most points match within the
+    0.3 m gate (fitness passes) and the walls pin the pose, but a quarter of the returns lie
+    0.12 m from any map edge; with ``align_min_tight_fraction`` 0.9 that is inconclusive."""
+    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
+    grid = room_grid(6, 4, 0.05, boxes=boxes)
+    world = room_grid(6, 4, 0.05, boxes=[(a + 0.12, b, c + 0.12, d) for a, b, c, d in boxes])
+    truth = np.array([3.0, 1.9, 0.0])
+    scan = make_scan(world, truth, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0)
+    a = _aligner(grid, align_min_tight_fraction=min_tight)
+    got, trusted = a.refine(truth, scan)
+    assert trusted and a.last_verified == verified
+    if not verified:
+        assert np.array_equal(got, truth)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gatmo.geometry import compose, relative
+from gatmo.geometry import compose, relative, transform_points
 from gatmo.scanmatch import IcpConfig, ScanMatchOdometry, icp_2d
 from tests.helpers import make_scan, room_grid
 
@@ -21,6 +21,27 @@ def test_icp_recovers_known_transform():
     err = relative(T, res.T_target_source)
     assert np.hypot(err[0], err[1]) < 0.01 and abs(np.degrees(err[2])) < 0.2
     assert res.converged and not res.degenerate and res.fitness > 0.8
+
+
+def test_geman_mcclure_ignores_furniture_that_moved_a_little():
+    """The map has three boxes where the scan sees them 0.15 m further along x: Huber weights
+    let those returns drag the alignment along x, Geman-McClure's redescending weights do not."""
+    boxes = [(2, 2, 3, 2.6), (6, 5, 6.4, 6.5), (7, 1, 8.5, 1.3)]
+    g_map = room_grid(10, 8, 0.05, boxes=boxes)
+    g_now = room_grid(10, 8, 0.05, boxes=[(x0 + 0.15, y0, x1 + 0.15, y1)
+                                          for x0, y0, x1, y1 in boxes])
+    truth = np.array([4.0, 4.0, 0.2])
+    target = transform_points(truth, make_scan(g_map, truth, n_beams=721,
+                                               fov_rad=2 * np.pi * 0.99,
+                                               max_range_m=12).points_base_xy())
+    src = make_scan(g_now, truth, n_beams=361, fov_rad=2 * np.pi * 0.99,
+                    max_range_m=12).points_base_xy()
+    start = truth + np.array([0.04, -0.03, np.radians(1)])
+    errs = {}
+    for kernel in ("huber", "geman_mcclure"):
+        res = icp_2d(src, target, start, max_corr_dist_m=0.3, max_iter=60, kernel=kernel)
+        errs[kernel] = float(np.hypot(*(res.T_target_source[:2] - truth[:2])))
+    assert errs["geman_mcclure"] < 0.005 < errs["huber"]
 
 
 def test_corridor_is_degenerate_along_its_axis():
