@@ -124,6 +124,10 @@ class GatmoConfig(GatmoModel):
         "within doubt_search_m, absent only with no returns around them")
     lookalike_tolerance: float = Field(0.15, gt=0)
     add_min_cells: int = Field(10, ge=1)
+    match_min_verified_scans: int = Field(
+        0, ge=0, description="scans from independently confirmed poses (pose_verified) a chair "
+        "needs before it may relocate a map object; the others still count towards "
+        "chair_min_scans and new objects")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
     add_min_free_fraction: float = Field(

@@ -756,6 +756,8 @@ class GatmoMapper:
         return _rank_key(o, mt, tier, earlier), mt
 
     def _try_match(self, m: Metaobject, stamp_s, events) -> bool:
+        if m.n_verified < self.cfg.match_min_verified_scans:
+            return False
         view = self._chair_view(m)
         if view is None:
             return False
