@@ -147,6 +147,8 @@ class GatmoMapper:
         self._front_through: dict[int, set] = {}
         self._doubt: set[int] = set()
         self._gamma_this_run: set[int] = set()  # Gamma objects seen this run
+        # per (object id, test): how often a chair was refused as this object this run
+        self.refusals: dict[tuple[int, str], int] = {}
 
     # ------------------------------------------------------------------ maps
     def grid(self) -> OccupancyGrid:
@@ -725,32 +727,43 @@ class GatmoMapper:
              view: tuple[np.ndarray, np.ndarray, float]) -> tuple[tuple, object] | None:
         """The chair of track ``m`` (its :meth:`_chair_view`) matched to ``o``, a candidate of
         ``tier`` (:meth:`_candidates`): (:func:`_rank_key`, match) if the match passes every
-        test, else None."""
+        test, else None (and the test that refused it counted in :attr:`refusals`)."""
+        why = self._refusal(m, o, tier, view)
+        if isinstance(why, str):
+            key = (o.id, why)
+            self.refusals[key] = self.refusals.get(key, 0) + 1
+            return None
+        return why
+
+    def _refusal(self, m: Metaobject, o: MapObject, tier: int,
+                 view: tuple[np.ndarray, np.ndarray, float]) -> tuple[tuple, object] | str:
         pts, everything, diam_p = view
         if tier == -1 and m.n_obs < self.cfg.match_patience_scans:
-            return None  # a movable object seen nowhere yet: only once nothing absent fits
+            return "patience"  # a movable object seen nowhere yet: only once nothing absent fits
         if diam_p > _diameter(o.shape_xy) + 3 * o.resolution_m:
-            return None  # what is seen is larger than the object
+            return "larger"  # what is seen is larger than the object
         if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
-            return None  # too little of the object seen yet to tell look-alikes apart
+            return "too_little"  # too little of the object seen yet to tell look-alikes apart
         mt = self._match(pts, o)
-        if mt.score < self.cfg.match_min_score or not self._free_consistent(o, mt):
-            return None
+        if mt.score < self.cfg.match_min_score:
+            return "score"
+        if not self._free_consistent(o, mt):
+            return "free_space"
         # every return the track ever had must fit too, or this is a part of something
         # larger (a desk's corner looks like a footstool's)
         local = transform_points(inverse(mt.pose_xytheta), everything)
         if self._field(o).score(local) < self.cfg.match_min_score - 0.15:
-            return None
+            return "all_returns"
         if self._part_of_larger(o, mt):
-            return None
+            return "part_of_larger"
         if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m):
-            return None
+            return "beams"
         # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
         if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
-            return None
+            return "far"
         earlier = self._at_earlier_pose(o, mt.pose_xytheta)
         if tier == -2 and not earlier:
-            return None
+            return "not_earlier"
         if tier in (1, -2):  # a shift nearby, or back where it stood: as good as doubted
             tier = 0
         return _rank_key(o, mt, tier, earlier), mt

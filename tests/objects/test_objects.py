@@ -701,6 +701,8 @@ def test_an_absent_desk_is_not_put_onto_a_new_box_that_fits_one_end(beam_check, 
     kinds = [e.kind for e in events if e.object_id == desk.id]
     assert kinds[0] == "absent", kinds
     assert ("relocated" in kinds) == relocated, kinds
+    # the test that refused the box as the desk is counted (GatmoMapper.refusals)
+    assert (m.refusals.get((desk.id, "beams"), 0) > 0) == beam_check, m.refusals
 
 
 def test_an_absence_takes_the_chair_that_fits_it_best_not_the_first_seen():
