@@ -21,7 +21,9 @@ localization error costs GATMO its finds, without the feedback loop.
 
 Outcomes: found (right object, true pose), twin (at an identical piece's true pose: the map is
 right, the identity swapped), wrong (relocated elsewhere), absent (noticed gone, not found),
-missed. Observability: both / old / new / none (>= 5 scans each).
+missed. Observability: both / old / new / none (>= 5 scans each). Per outcome, the pieces seen
+at both places that had a chair refused as them this run, by the matching test that refused it
+(``GatmoMapper.refusals``: score, free_space, too_little, larger, beams, ...).
 """
 
 from __future__ import annotations
@@ -137,6 +139,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
             for e in mapper.update(s.gt_pose_xytheta + err[i], s, pose_confident=trusted[i],
                                    stamp_s=s.stamp_s):
                 events.append(dict(e.as_dict(), scan=i))
+        refusals = dict(mapper.refusals)  # this run's, before end_run adds Gamma's
         events += [dict(e.as_dict(), scan=len(scans)) for e in mapper.end_run()]
         run = doc["runs"][k]
         cur = {p["id"]: p for p in run["objects"]}
@@ -151,7 +154,9 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
             rows.append({"seed": seed, "run": k + 1, "label": c["label"], "kind": c["kind"],
                          "returned": bool(c.get("returned")), "observed": obs, "outcome": out,
                          "scans_to_match": rel[-1]["support_scans"] if rel else None,
-                         "stack_median_error_m": stack_err_m})
+                         "stack_median_error_m": stack_err_m,
+                         "refusals": {why: n for (oid, why), n in refusals.items()
+                                      if oid == o.id}})
         prev = cur
     return rows
 
@@ -209,6 +214,17 @@ def main(argv=None) -> int:
                    is not None and lo <= r["stack_median_error_m"] < hi]
             total[f"found_of_seen_both_stack_error_{lo}_{hi}_m"] = (
                 len(sel), sum(r["outcome"] == "found" for r in sel) / max(len(sel), 1))
+    # of the pieces seen at both places, by outcome: how many had a chair refused as them, by
+    # the test that refused it (GatmoMapper.refusals; a piece counts once per test)
+    refused: dict = {}
+    for r in rows:
+        if r["observed"] == "both":
+            d = refused.setdefault(r["outcome"], {"pieces": 0, "any": 0})
+            d["pieces"] += 1
+            d["any"] += bool(r["refusals"])
+            for why in r["refusals"]:
+                d[why] = d.get(why, 0) + 1
+    total["refused_of_seen_both_by_outcome"] = refused
     back = [r for r in rows if r["returned"] and r["observed"] == "both"]
     if back:  # pieces put back where they stood before (--return-prob)
         total["returned_seen_both"] = len(back)
