@@ -139,7 +139,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
             for e in mapper.update(s.gt_pose_xytheta + err[i], s, pose_confident=trusted[i],
                                    stamp_s=s.stamp_s):
                 events.append(dict(e.as_dict(), scan=i))
-        refusals = dict(mapper.refusals)  # this run's, before end_run adds Gamma's
+        refusals = dict(mapper.refusals)  # this run's: the next begin_run clears them
         events += [dict(e.as_dict(), scan=len(scans)) for e in mapper.end_run()]
         run = doc["runs"][k]
         cur = {p["id"]: p for p in run["objects"]}

@@ -75,7 +75,7 @@ class FusionConfig(GatmoModel):
     The alignment runs at most ``align_max_iter`` Gauss-Newton steps with ``align_kernel``
     weights at ``align_kernel_scale_m``: ``geman_mcclure`` (redescending, as kiss-icp) lets
     furniture moved by less than the 0.3 m correspondence gate drop out instead of pulling the
-    pose towards where it stood. ``align_min_tight_fraction`` (0 = off): a converged alignment
+    pose towards where it stood. ``align_min_tight_fraction`` (0: no test): a converged alignment
     also needs this fraction of the scan's points within ``align_tight_m`` of a map edge, else
     it is inconclusive; a fit that is loose everywhere agrees with the map only roughly.
 

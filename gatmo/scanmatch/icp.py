@@ -4,6 +4,7 @@ Geman-McClure weights, Gauss-Newton on SE(2), covariance from the Hessian and a 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -51,7 +52,8 @@ def icp_2d(source_xy: np.ndarray, target_xy: np.ndarray, init_xytheta=(0.0, 0.0,
            target_tree: cKDTree | None = None, target_normals: np.ndarray | None = None,
            max_corr_dist_m: float = 0.5, max_iter: int = 30, kernel_scale_m: float = 0.05,
            tol_xy_m: float = 1e-4, tol_theta_rad: float = 1e-5,
-           degenerate_ratio: float = 1e-3, kernel: str = "huber") -> IcpResult:
+           degenerate_ratio: float = 1e-3,
+           kernel: Literal["huber", "geman_mcclure"] = "huber") -> IcpResult:
     """Align ``source_xy`` (N, 2) to ``target_xy`` (M, 2) from ``init_xytheta``.
 
     ``kernel``: ``huber`` (a residual beyond ``kernel_scale_m`` pulls with a constant force) or
