@@ -28,6 +28,9 @@ class IcpConfig(GatmoModel):
     min_fitness: float = Field(0.5, ge=0, le=1)
     max_correction_m: float = Field(0.3, gt=0, description="ICP vs odometry; more -> odometry")
     max_range_m: float = Field(30.0, gt=0)
+    odom_jump_m: float = Field(
+        0.2, gt=0, description="odometry step this far from constant velocity: try both guesses")
+    odom_jump_rad: float = Field(0.2, gt=0)
 
 
 @dataclass
@@ -51,8 +54,9 @@ class ScanMatchOdometry:
         self._tree = None
         self._normals = None
         self._map = None
+        self._last_step = np.zeros(3)  # last scan-to-scan motion (constant-velocity guess)
         self.stats = {"scans": 0, "icp": 0, "fallback_few_points": 0, "fallback_bad_fit": 0,
-                      "degenerate": 0}
+                      "degenerate": 0, "odom_jumps": 0}
 
     @classmethod
     def from_config(cls, cfg: IcpConfig) -> ScanMatchOdometry:
@@ -81,6 +85,7 @@ class ScanMatchOdometry:
                 self._kf_pose = self.pose.copy()
                 self._rebuild()
             return MatchResult(self.pose.copy(), np.eye(3) * 1e-6, 1.0, False)
+        prev_pose = self.pose.copy()
         guess = compose(self.pose, relative(self._odom_prev, odom))
         self._odom_prev = odom
         used = False
@@ -90,22 +95,37 @@ class ScanMatchOdometry:
             self.stats["fallback_few_points"] += 1
             self.pose = guess
         else:
-            res = icp_2d(pts, self._map, guess, target_tree=self._tree,
-                         target_normals=self._normals, max_corr_dist_m=c.max_corr_dist_m,
-                         max_iter=c.max_iter, kernel_scale_m=c.kernel_scale_m)
-            corr = relative(guess, res.T_target_source)
-            if res.degenerate:
-                self.stats["degenerate"] += 1
-            if (res.fitness < c.min_fitness or res.degenerate
-                    or np.hypot(corr[0], corr[1]) > c.max_correction_m):
+            # Logged wheel odometry stalls and then jumps (MIT CSAIL: four zero steps, then
+            # 0.85 m / 50 deg at once). When its step disagrees with constant velocity, ICP
+            # also starts from the constant-velocity guess and the better fit wins.
+            guesses = [guess]
+            cv = compose(self.pose, self._last_step)
+            jump = relative(guess, cv)
+            if np.hypot(jump[0], jump[1]) > c.odom_jump_m or abs(jump[2]) > c.odom_jump_rad:
+                guesses.append(cv)
+                self.stats["odom_jumps"] += 1
+            best = None
+            for g in guesses:
+                res = icp_2d(pts, self._map, g, target_tree=self._tree,
+                             target_normals=self._normals, max_corr_dist_m=c.max_corr_dist_m,
+                             max_iter=c.max_iter, kernel_scale_m=c.kernel_scale_m)
+                corr = relative(g, res.T_target_source)
+                if res.degenerate:
+                    self.stats["degenerate"] += 1
+                ok = not (res.fitness < c.min_fitness or res.degenerate
+                          or np.hypot(corr[0], corr[1]) > c.max_correction_m)
+                if ok and (best is None or res.fitness > best.fitness):
+                    best = res
+            if best is None:
                 self.stats["fallback_bad_fit"] += 1
                 self.pose = guess
             else:
-                self.pose = res.T_target_source
+                self.pose = best.T_target_source
                 used = True
-                fitness = res.fitness
-                cov = res.cov
+                fitness = best.fitness
+                cov = best.cov
                 self.stats["icp"] += 1
+        self._last_step = relative(prev_pose, self.pose)
         if len(pts) >= c.min_points:
             d = relative(self._kf_pose if self._kf_pose is not None else self.pose, self.pose)
             if (self._kf_pose is None or np.hypot(d[0], d[1]) > c.keyframe_dist_m
