@@ -128,6 +128,10 @@ class GatmoConfig(GatmoModel):
         0, ge=0, description="scans from independently confirmed poses (pose_verified) a chair "
         "needs before it may relocate a map object; the others still count towards "
         "chair_min_scans and new objects")
+    match_from_verified_grid: bool = Field(
+        False, description="a chair is matched to map objects on the evidence grid of the "
+        "scans from independently confirmed poses (pose_verified) only; every scan still "
+        "feeds the track, its person / chair verdict and new objects")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
     add_min_free_fraction: float = Field(

@@ -628,13 +628,14 @@ class GatmoMapper:
         touched = []
         for mid, zs in assigned.items():
             m = by_id[mid]
-            m.update(np.vstack(zs), stamp_s)
+            m.update(np.vstack(zs), stamp_s, verified=verified)
             m.n_verified += int(verified)
             if self._view is not None:
                 m.add_view(self._view)
             touched.append(m)
         for z in fresh:
-            m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m)
+            m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m,
+                           verified=verified)
             m.n_verified = int(verified)
             if self._view is not None:
                 m.add_view(self._view)
@@ -718,10 +719,11 @@ class GatmoMapper:
     def _chair_view(self, m: Metaobject) -> tuple[np.ndarray, np.ndarray, float] | None:
         """(chair points, every return the track had, the chair's diameter [m]) of track
         ``m``, or None while it has fewer than ``chair_min_cells`` chair cells."""
-        pts = m.chair_points()
+        v = self.cfg.match_from_verified_grid
+        pts = m.chair_points(verified=v)
         if len(pts) < self.cfg.chair_min_cells:
             return None
-        return pts, m.chair_points(min_count=1, min_fraction=0.0), _diameter(pts)
+        return pts, m.chair_points(min_count=1, min_fraction=0.0, verified=v), _diameter(pts)
 
     def _fit(self, m: Metaobject, o: MapObject, tier: int,
              view: tuple[np.ndarray, np.ndarray, float]) -> tuple[tuple, object] | None:

@@ -16,7 +16,8 @@ BODY_SPREAD_M = 0.2
 class Metaobject:
     """One tracked cluster. ``points`` are world points (K, 2) of its first observation."""
 
-    def __init__(self, mid: int, points: np.ndarray, stamp_s: float, cfg, res_m: float):
+    def __init__(self, mid: int, points: np.ndarray, stamp_s: float, cfg, res_m: float,
+                 verified: bool = True):
         self.id = mid
         self.cfg = cfg
         self.res = res_m
@@ -31,6 +32,9 @@ class Metaobject:
         self.first_seen = stamp_s
         self.last_seen = stamp_s
         self.evidence: dict[tuple[int, int], int] = {}
+        # the same grid from the scans whose pose an independent check confirmed only
+        self.evidence_verified: dict[tuple[int, int], int] = {}
+        self.n_obs_verified = 0
         self.n_obs = 0
         self.ll_person = 0.0
         self.ll_chair = 0.0
@@ -39,7 +43,7 @@ class Metaobject:
         self.n_verified = 0  # observations from independently confirmed poses (set by the mapper)
         # the scans that saw it (set by the mapper): laser pose, angles, ranges, reach
         self.views: list[tuple] = []
-        self._add(points, stamp_s)
+        self._add(points, stamp_s, verified)
 
     # -------------------------------------------------------------- hypotheses
     def predict(self, stamp_s: float) -> None:
@@ -84,15 +88,15 @@ class Metaobject:
         return float(np.logaddexp(self.log_p_person(points), self.log_p_chair(points)))
 
     # ------------------------------------------------------------------ update
-    def update(self, points: np.ndarray, stamp_s: float) -> None:
+    def update(self, points: np.ndarray, stamp_s: float, verified: bool = True) -> None:
         self.predict(stamp_s)
         # accumulate each hypothesis' predictive likelihood, per point so sizes compare
         n = max(len(points), 1)
         self.ll_person = 0.9 * self.ll_person + self.log_p_person(points) / n
         self.ll_chair = 0.9 * self.ll_chair + self.log_p_chair(points) / n
-        self._add(points, stamp_s)
+        self._add(points, stamp_s, verified)
 
-    def _add(self, points: np.ndarray, stamp_s: float) -> None:
+    def _add(self, points: np.ndarray, stamp_s: float, verified: bool = True) -> None:
         c = points.mean(axis=0)
         if self.n_obs:
             self.kf.update(c)
@@ -103,6 +107,10 @@ class Metaobject:
             keys = self._aligned(keys, k_align)
         for k in keys:
             self.evidence[k] = self.evidence.get(k, 0) + 1
+        if verified:
+            for k in keys:
+                self.evidence_verified[k] = self.evidence_verified.get(k, 0) + 1
+            self.n_obs_verified += 1
         self.n_obs += 1
         self.last_seen = stamp_s
 
@@ -147,12 +155,16 @@ class Metaobject:
             return "chair"
         return "person"
 
-    def chair_points(self, min_count: int = 2, min_fraction: float = 0.05) -> np.ndarray:
+    def chair_points(self, min_count: int = 2, min_fraction: float = 0.05,
+                     verified: bool = False) -> np.ndarray:
         """World centres (K, 2) of evidence cells hit in at least ``min_count`` scans and
         ``min_fraction`` of this track's scans. The count is absolute, not a fraction of all
-        scans: a robot driving past sees each side of a still object for a part of the time."""
-        need = max(min_count, int(np.ceil(min_fraction * self.n_obs)))
-        keys = [k for k, v in self.evidence.items() if v >= need]
+        scans: a robot driving past sees each side of a still object for a part of the time.
+        ``verified``: from the scans whose pose was independently confirmed only."""
+        ev, n = ((self.evidence_verified, self.n_obs_verified) if verified
+                 else (self.evidence, self.n_obs))
+        need = max(min_count, int(np.ceil(min_fraction * n)))
+        keys = [k for k, v in ev.items() if v >= need]
         if not keys:
             return np.zeros((0, 2))
         return (np.array(keys, dtype=float) + 0.5) * self.res
@@ -195,6 +207,9 @@ class Metaobject:
                 self.add_view(v)
         for k, v in other.evidence.items():
             self.evidence[k] = self.evidence.get(k, 0) + v
+        for k, v in other.evidence_verified.items():
+            self.evidence_verified[k] = self.evidence_verified.get(k, 0) + v
+        self.n_obs_verified = max(self.n_obs_verified, other.n_obs_verified)
         self.n_obs = max(self.n_obs, other.n_obs)
         self.n_verified += other.n_verified
         self.first_seen = min(self.first_seen, other.first_seen)

@@ -530,13 +530,15 @@ def test_rays_from_unconfirmed_poses_do_not_make_objects_absent(verified_only, a
     ({}, True, True),
     ({"track_from_verified_only": True}, False, False),
     ({"match_min_verified_scans": 9}, False, True),
+    ({"match_from_verified_grid": True}, False, True),
 ])
 def test_returns_from_unconfirmed_poses_need_not_feed_tracks_or_matches(update, relocated,
                                                                        tracked):
     # the shifted box again, every pose unconfirmed by the scan-to-map alignment: by default
     # its returns are tracked and the chair there relocates it; with track_from_verified_only
     # no track starts, yet the returns still count as unexplained (for the localizer's mask);
-    # with match_min_verified_scans the track forms but may not relocate anything
+    # with match_min_verified_scans the track forms but may not relocate anything; with
+    # match_from_verified_grid it forms, but its grid for matching stays empty
     m, box, world = _shifted_box()
     m.cfg = m.cfg.model_copy(update={**update, "absence_from_verified_only": False})
     events = []
@@ -549,6 +551,31 @@ def test_returns_from_unconfirmed_poses_need_not_feed_tracks_or_matches(update, 
     if not relocated:  # the box's west face, where its returns land
         assert m.unexplained_at(np.array([[5.0, 3.0]])).all()
 
+
+
+
+@pytest.mark.parametrize("verified_grid", [False, True])
+def test_the_grid_for_matching_can_hold_only_returns_from_confirmed_poses(verified_grid):
+    # the shifted box seen from confirmed poses, with every other scan's pose 5 cm off (an
+    # unconfirmed pose): on the track's full grid the smeared chair fails the match score; on
+    # the grid of the confirmed scans (match_from_verified_grid) it relocates the box at its
+    # true new pose, while every scan still fed the track
+    m, box, world = _shifted_box()
+    m.cfg = m.cfg.model_copy(update={"match_from_verified_grid": verified_grid,
+                                     "absence_from_verified_only": False})
+    events = []
+    for i, x in enumerate(np.linspace(2.0, 3.0, 30)):
+        s = make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=0.1 * i)
+        ok = i % 2 == 0
+        pose = s.gt_pose_xytheta + (0.0 if ok else np.array([0.0, 0.05, 0.0]))
+        events += m.update(pose, s, pose_confident=True, stamp_s=0.1 * i, pose_verified=ok)
+    (track,) = m._meta
+    assert 0 < track.n_obs_verified < track.n_obs
+    if verified_grid:
+        assert [e.kind for e in events] == ["relocated"]
+        assert np.hypot(*(box.pose_xytheta[:2] - [5.075, 3.0])) < 0.06
+    else:
+        assert events == [] and m.refusals.get((box.id, "score"), 0) > 0
 
 @pytest.mark.parametrize("offset, kind", [((0.0, 0.0, np.pi), "restored"),
                                           ((0.0, 0.0, np.pi / 2), "relocated"),
