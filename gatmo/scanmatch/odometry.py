@@ -29,8 +29,12 @@ class IcpConfig(GatmoModel):
     max_correction_m: float = Field(0.3, gt=0, description="ICP vs odometry; more -> odometry")
     max_range_m: float = Field(30.0, gt=0)
     odom_jump_m: float = Field(
-        0.2, gt=0, description="odometry step this far from constant velocity: try both guesses")
+        0.2, gt=0, description="an odometry step this far from constant velocity is a jump: "
+        "after a stall, or when ICP from odometry fails, ICP also starts from constant velocity")
     odom_jump_rad: float = Field(0.2, gt=0)
+    velocity_window_s: float = Field(
+        0.5, gt=0, description="constant velocity: the mean over at least this much of the "
+        "last matched poses")
 
 
 @dataclass
@@ -54,13 +58,46 @@ class ScanMatchOdometry:
         self._tree = None
         self._normals = None
         self._map = None
-        self._last_step = np.zeros(3)  # last scan-to-scan motion (constant-velocity guess)
+        self._recent: deque = deque(maxlen=64)  # (stamp s, pose) of the last scans
+        self._stalled = False  # the last odometry step was exactly zero
         self.stats = {"scans": 0, "icp": 0, "fallback_few_points": 0, "fallback_bad_fit": 0,
-                      "degenerate": 0, "odom_jumps": 0}
+                      "degenerate": 0, "odom_jumps": 0, "velocity_guess": 0}
 
     @classmethod
     def from_config(cls, cfg: IcpConfig) -> ScanMatchOdometry:
         return cls(cfg)
+
+    def _velocity_step(self, stamp_s: float) -> np.ndarray:
+        """Constant-velocity step (3,) from the last pose to ``stamp_s``: the mean velocity
+        over at least ``velocity_window_s`` of recent poses (scan stamps can be irregular: a
+        single step over 1 ms says nothing) times the time since the last scan (at most 0.5 s).
+        """
+        if len(self._recent) < 2:
+            return np.zeros(3)
+        t1, p1 = self._recent[-1]
+        t0, p0 = t1, p1
+        for t, p in reversed(self._recent):
+            t0, p0 = t, p
+            if t1 - t0 >= self.cfg.velocity_window_s:
+                break
+        if t1 - t0 < 0.2 * self.cfg.velocity_window_s:
+            return np.zeros(3)
+        return relative(p0, p1) / (t1 - t0) * float(np.clip(stamp_s - t1, 0.0, 0.5))
+
+    def _icp(self, pts: np.ndarray, guess: np.ndarray):
+        """ICP of ``pts`` against the local map from ``guess``: the result if it passes the
+        acceptance test (fitness, not degenerate, correction), else None."""
+        c = self.cfg
+        res = icp_2d(pts, self._map, guess, target_tree=self._tree,
+                     target_normals=self._normals, max_corr_dist_m=c.max_corr_dist_m,
+                     max_iter=c.max_iter, kernel_scale_m=c.kernel_scale_m)
+        corr = relative(guess, res.T_target_source)
+        if res.degenerate:
+            self.stats["degenerate"] += 1
+        if (res.fitness < c.min_fitness or res.degenerate
+                or np.hypot(corr[0], corr[1]) > c.max_correction_m):
+            return None
+        return res
 
     def _points_base(self, scan: Scan) -> np.ndarray:
         pts = scan.points_base_xy()
@@ -80,14 +117,16 @@ class ScanMatchOdometry:
         pts = self._points_base(scan)
         if self._odom_prev is None:
             self._odom_prev = odom
+            self._recent.append((float(scan.stamp_s), self.pose.copy()))
             if len(pts) >= c.min_points:
                 self._keyframes.append((self.pose.copy(), pts))
                 self._kf_pose = self.pose.copy()
                 self._rebuild()
             return MatchResult(self.pose.copy(), np.eye(3) * 1e-6, 1.0, False)
-        prev_pose = self.pose.copy()
-        guess = compose(self.pose, relative(self._odom_prev, odom))
+        step = relative(self._odom_prev, odom)
+        guess = compose(self.pose, step)
         self._odom_prev = odom
+        was_stalled, self._stalled = self._stalled, bool(np.all(np.abs(step) < 1e-9))
         used = False
         fitness = 0.0
         cov = np.diag([0.05, 0.05, 0.02]) ** 2
@@ -95,27 +134,21 @@ class ScanMatchOdometry:
             self.stats["fallback_few_points"] += 1
             self.pose = guess
         else:
-            # Logged wheel odometry stalls and then jumps (MIT CSAIL: four zero steps, then
-            # 0.85 m / 50 deg at once). When its step disagrees with constant velocity, ICP
-            # also starts from the constant-velocity guess and the better fit wins.
-            guesses = [guess]
-            cv = compose(self.pose, self._last_step)
-            jump = relative(guess, cv)
-            if np.hypot(jump[0], jump[1]) > c.odom_jump_m or abs(jump[2]) > c.odom_jump_rad:
-                guesses.append(cv)
-                self.stats["odom_jumps"] += 1
-            best = None
-            for g in guesses:
-                res = icp_2d(pts, self._map, g, target_tree=self._tree,
-                             target_normals=self._normals, max_corr_dist_m=c.max_corr_dist_m,
-                             max_iter=c.max_iter, kernel_scale_m=c.kernel_scale_m)
-                corr = relative(g, res.T_target_source)
-                if res.degenerate:
-                    self.stats["degenerate"] += 1
-                ok = not (res.fitness < c.min_fitness or res.degenerate
-                          or np.hypot(corr[0], corr[1]) > c.max_correction_m)
-                if ok and (best is None or res.fitness > best.fitness):
-                    best = res
+            # Logged wheel odometry can stall and then jump (MIT CSAIL: four zero steps, then
+            # 0.85 m / 50 deg at once) or spike (0.8 rad in a 0.35 rad/scan turn). A step far
+            # from constant velocity is a jump: after a stall ICP starts from both guesses
+            # (the better fit wins); otherwise constant velocity is tried only if ICP from
+            # odometry fails (Intel's jerky turns are real: there the odometry guess wins).
+            cv = compose(self.pose, self._velocity_step(float(scan.stamp_s)))
+            d = relative(guess, cv)
+            jump = bool(np.hypot(d[0], d[1]) > c.odom_jump_m or abs(d[2]) > c.odom_jump_rad)
+            self.stats["odom_jumps"] += int(jump)
+            best = self._icp(pts, guess)
+            if jump and (was_stalled or best is None):
+                alt = self._icp(pts, cv)
+                if alt is not None and (best is None or alt.fitness > best.fitness):
+                    best = alt
+                    self.stats["velocity_guess"] += 1
             if best is None:
                 self.stats["fallback_bad_fit"] += 1
                 self.pose = guess
@@ -125,7 +158,7 @@ class ScanMatchOdometry:
                 fitness = best.fitness
                 cov = best.cov
                 self.stats["icp"] += 1
-        self._last_step = relative(prev_pose, self.pose)
+        self._recent.append((float(scan.stamp_s), self.pose.copy()))
         if len(pts) >= c.min_points:
             d = relative(self._kf_pose if self._kf_pose is not None else self.pose, self.pose)
             if (self._kf_pose is None or np.hypot(d[0], d[1]) > c.keyframe_dist_m
