@@ -11,7 +11,7 @@ Maps and reference poses:
   the corrected ones (intel stamps = corrected stamps + 976052857.33753 s, README of the data);
 * aces, mit-csail: the corrected logs cannot be joined to the bags (ACES has no published time
   offset, the CSAIL log stores 6-digit stamps), so the map and reference poses come from
-  ``gatmo map build`` on the bag itself (pose graph: 0.036 m / 0.042 m relations error). The
+  ``gatmo map build`` on the bag itself (pose graph: 0.036 m / 0.031 m relations error). The
   relations (independent ground truth) score both sides either way.
 
 Needs ../shared/data (skips with a message otherwise). Writes bench-out/real_compare/<log>/ and
