@@ -629,14 +629,12 @@ class GatmoMapper:
         for mid, zs in assigned.items():
             m = by_id[mid]
             m.update(np.vstack(zs), stamp_s, verified=verified)
-            m.n_verified += int(verified)
             if self._view is not None:
                 m.add_view(self._view)
             touched.append(m)
         for z in fresh:
             m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m,
                            verified=verified)
-            m.n_verified = int(verified)
             if self._view is not None:
                 m.add_view(self._view)
             self._next_meta += 1

@@ -34,13 +34,12 @@ class Metaobject:
         self.evidence: dict[tuple[int, int], int] = {}
         # the same grid from the scans whose pose an independent check confirmed only
         self.evidence_verified: dict[tuple[int, int], int] = {}
-        self.n_obs_verified = 0
+        self.n_verified = 0  # observations from independently confirmed poses
         self.n_obs = 0
         self.ll_person = 0.0
         self.ll_chair = 0.0
         self.centres: list[np.ndarray] = []
         self.matched_object: int | None = None
-        self.n_verified = 0  # observations from independently confirmed poses (set by the mapper)
         # the scans that saw it (set by the mapper): laser pose, angles, ranges, reach
         self.views: list[tuple] = []
         self._add(points, stamp_s, verified)
@@ -110,7 +109,7 @@ class Metaobject:
         if verified:
             for k in keys:
                 self.evidence_verified[k] = self.evidence_verified.get(k, 0) + 1
-            self.n_obs_verified += 1
+            self.n_verified += 1
         self.n_obs += 1
         self.last_seen = stamp_s
 
@@ -161,7 +160,7 @@ class Metaobject:
         ``min_fraction`` of this track's scans. The count is absolute, not a fraction of all
         scans: a robot driving past sees each side of a still object for a part of the time.
         ``verified``: from the scans whose pose was independently confirmed only."""
-        ev, n = ((self.evidence_verified, self.n_obs_verified) if verified
+        ev, n = ((self.evidence_verified, self.n_verified) if verified
                  else (self.evidence, self.n_obs))
         need = max(min_count, int(np.ceil(min_fraction * n)))
         keys = [k for k, v in ev.items() if v >= need]
@@ -209,7 +208,6 @@ class Metaobject:
             self.evidence[k] = self.evidence.get(k, 0) + v
         for k, v in other.evidence_verified.items():
             self.evidence_verified[k] = self.evidence_verified.get(k, 0) + v
-        self.n_obs_verified = max(self.n_obs_verified, other.n_obs_verified)
         self.n_obs = max(self.n_obs, other.n_obs)
         self.n_verified += other.n_verified
         self.first_seen = min(self.first_seen, other.first_seen)

@@ -570,7 +570,7 @@ def test_the_grid_for_matching_can_hold_only_returns_from_confirmed_poses(verifi
         pose = s.gt_pose_xytheta + (0.0 if ok else np.array([0.0, 0.05, 0.0]))
         events += m.update(pose, s, pose_confident=True, stamp_s=0.1 * i, pose_verified=ok)
     (track,) = m._meta
-    assert 0 < track.n_obs_verified < track.n_obs
+    assert 0 < track.n_verified < track.n_obs
     if verified_grid:
         assert [e.kind for e in events] == ["relocated"]
         assert np.hypot(*(box.pose_xytheta[:2] - [5.075, 3.0])) < 0.06
