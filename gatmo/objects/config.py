@@ -132,6 +132,17 @@ class GatmoConfig(GatmoModel):
         False, description="a chair is matched to map objects on the evidence grid of the "
         "scans from independently confirmed poses (pose_verified) only; every scan still "
         "feeds the track, its person / chair verdict and new objects")
+    offset_min_returns: int = Field(
+        4, ge=1, description="GatmoMapper.offset_at: returns an object needs in a scan before "
+        "they can be said to miss it")
+    offset_min_m: float = Field(
+        0.08, gt=0, description="GatmoMapper.offset_at: median distance of an object's returns "
+        "to it above which they miss it")
+    offset_fit_m: float = Field(
+        0.05, gt=0, description="GatmoMapper.offset_at: a return this close to the map fits it")
+    offset_min_fit_fraction: float = Field(
+        0.6, ge=0, le=1, description="GatmoMapper.offset_at: of the scan's other returns near "
+        "the map, the fraction that must fit it (else the pose, not an object, is off)")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
     add_min_free_fraction: float = Field(

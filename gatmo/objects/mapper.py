@@ -351,6 +351,43 @@ class GatmoMapper:
         out[ok] = self._owned_by_doubted(owner) & (self._near_dist[cy, cx] <= self.cfg.delta_W_m)
         return out
 
+    def offset_at(self, points_xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: the returns of one scan, placed in the map frame (N, 2) from a predicted
+        pose, that belong to an object whose returns miss it by a consistent offset: at least
+        ``offset_min_returns`` returns within ``absence_near_m`` whose nearest map cell is the
+        object's, their median distance to it more than ``offset_min_m``, while the rest of
+        the scan's returns near the map fit it (at least ``offset_min_fit_fraction`` of them
+        within ``offset_fit_m``). Beyond the paper: a piece shifted by a decimetre or more that
+        GATMO has not relocated yet returns next to its old place, and a likelihood field
+        pulls the particles towards it; against everything else in view it is the one that
+        disagrees. Walls and structure are never singled out. Empty when the scan as a whole
+        does not fit (the prediction may be off)."""
+        cfg = self.cfg
+        min_returns = cfg.offset_min_returns
+        g = self._grid
+        pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+        out = np.zeros(len(pts), dtype=bool)
+        c = g.world_to_cell(pts)
+        ok = g.in_bounds(c)
+        if ok.sum() < 2 * min_returns:
+            return out
+        idx = np.nonzero(ok)[0]
+        dist = self._near_dist[c[ok, 1], c[ok, 0]]
+        owner = self._near_owner[c[ok, 1], c[ok, 0]]
+        near = dist <= cfg.absence_near_m  # returns far from the map: another matter
+        odd = np.zeros(len(idx), dtype=bool)
+        for i in np.unique(owner[near & (owner >= 0)]):
+            mine = near & (owner == i)
+            if mine.sum() >= min_returns and np.median(dist[mine]) > cfg.offset_min_m:
+                odd |= mine
+        rest = near & ~odd
+        if not odd.any() or rest.sum() < 2 * min_returns:
+            return out
+        if np.mean(dist[rest] <= cfg.offset_fit_m) < cfg.offset_min_fit_fraction:
+            return out
+        out[idx[odd]] = True
+        return out
+
     def _owned_by_doubted(self, owner: np.ndarray) -> np.ndarray:
         """(N,) bool: which entries of ``owner`` (object indices, < 0 for none) are in doubt."""
         objs = self.object_map.objects

@@ -774,3 +774,59 @@ def test_a_partial_view_takes_the_alignment_that_covers_no_free_space(side):
     assert m.score > 0.9
     assert side * (centre_y(m.pose_xytheta) - line_y) > 0.25
     assert np.isclose(abs(np.cos(m.pose_xytheta[2])), 1.0, atol=0.02)  # the side stays level
+
+
+def test_returns_missing_one_object_by_an_offset_are_singled_out():
+    """A box shifted 0.2 m towards the robot: seen from the true pose, its returns miss the
+    map's box by a consistent offset while the walls' fit, and ``offset_at`` singles out
+    exactly those. From a pose 0.2 m off nothing is singled out (the whole scan misfits)."""
+    grid = room_grid(8, 6, 0.05, boxes=[(4.0, 2.0, 4.6, 2.6)])
+    world = room_grid(8, 6, 0.05, boxes=[(3.8, 2.0, 4.4, 2.6)])
+    m = GatmoMapper.from_config(GatmoConfig(), grid)
+    truth = np.array([2.0, 3.0, 0.0])
+
+    def ends(pose_scan, pose_place):
+        s = make_scan(world, pose_scan, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0)
+        ok = s.valid
+        a = pose_place[2] + s.angles_rad[ok]
+        return pose_place[:2] + s.ranges_m[ok, None] * np.stack([np.cos(a), np.sin(a)], 1)
+
+    pts = ends(truth, truth)
+    odd = m.offset_at(pts)
+    on_box = (pts[:, 0] > 3.7) & (pts[:, 0] < 4.5) & (pts[:, 1] > 1.9) & (pts[:, 1] < 2.7)
+    assert on_box.sum() >= 8
+    assert odd[on_box].mean() > 0.9 and not odd[~on_box].any()
+    # the map as it stands: nothing to single out
+    assert not GatmoMapper.from_config(GatmoConfig(), world).offset_at(pts).any()
+    # placed from a pose 0.2 m off, the walls misfit too: no object is singled out
+    assert not m.offset_at(ends(truth, truth + [0.2, 0.15, 0.0])).any()
+
+
+def test_a_person_walking_through_the_room_never_becomes_a_map_object():
+    """Two legs (0.1 m squares) walk 4 m at 1 m/s, then leave, in front of a robot that drives
+    along with a true pose: GATMO tracks them as a person (counted when the track expires)
+    and, at the end of the run, adds nothing of them to the map, marks nothing absent and
+    relocates nothing; a box standing still in the same run is added (so the run could add
+    objects)."""
+    grid = room_grid(10, 6, 0.05)
+    m = GatmoMapper.from_config(CFG, grid)
+    m.begin_run(1)
+    events = []
+    for i in range(100):
+        t = 0.1 * i
+        world = room_grid(10, 6, 0.05, boxes=[(6.0, 4.6, 6.5, 5.1)])
+        x = 1.0 + 1.0 * t  # walking along y = 2 at 1 m/s, legs swinging 0.15 m
+        swing = 0.15 * np.sin(2 * np.pi * t)
+        for lx, ly in ((x + swing, 1.9), (x - swing, 2.15)) if t < 4.0 else ():
+            c0 = world.world_to_cell(np.array([[lx - 0.05, ly - 0.05], [lx + 0.05, ly + 0.05]]))
+            world.cells[c0[0, 1]:c0[1, 1] + 1, c0[0, 0]:c0[1, 0] + 1] = 100
+        pose = np.array([1.5 + 0.05 * i, 3.5, -0.3])
+        s = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0, stamp_s=t)
+        events += m.update(pose, s, pose_confident=True, stamp_s=t)
+    events += m.end_run()
+    assert m.counts["persons"] >= 1
+    kinds = [e.kind for e in events]
+    assert "absent" not in kinds and "relocated" not in kinds
+    added = [o for o in m.object_map.objects if o.status == "M" and not o.structure]
+    assert len(added) == 1  # the box, not the legs
+    assert np.hypot(*(added[0].cells_world().mean(0) - [6.25, 4.85])) < 0.2
