@@ -101,11 +101,11 @@ class FusionConfig(GatmoModel):
     odometry predicts), while the filter's last estimate passes GATMO's strict confidence test
     (``absence_max_std_*``; a broad cloud's prediction is no base for a 5 cm fit): a piece
     shifted by a decimetre or more, before GATMO has relocated it, pulls a likelihood field
-    towards its old place. Measured against it off
-    (``bench_gatmo_sim``, 2026-11-25): held-out hall seeds 100-119, the full stack's ATE lower
-    on 14 of 20 seeds, time lost 4.7 % -> 2.4 %, median ratio to the static localizer 0.29 ->
-    0.21; tuning seeds 300-319, ATE lower on 16 of 20, false relocations 1.65 -> 1.15 per
-    seed.
+    towards its old place. Measured against it off (``bench_gatmo_sim``, tuning hall seeds
+    300-319, 2026-11-25): full-stack ATE lower on 17 of 20 seeds, false relocations 1.65 ->
+    1.25 per seed, time lost unchanged (7.8 % -> 7.7 %); without the confidence gate time lost
+    fell to 6.0 %, but on the Intel log the full stack was then worse than the static
+    localizer (0.199 against 0.196 m ATE). See docs/experiments.md.
 
     ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
     estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
