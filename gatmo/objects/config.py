@@ -145,5 +145,12 @@ class GatmoConfig(GatmoModel):
         "the map, the fraction that must fit it (else the pose, not an object, is off)")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
+    add_max_passed_fraction: float = Field(
+        0.5, ge=0, le=1, description="of a new object's cells, the fraction rays may have "
+        "passed (match_free_rays of them, going on add_gone_beyond_m or more) since a return "
+        "last landed there: above it, it has gone again this run and is not added")
+    add_gone_beyond_m: float = Field(
+        0.25, gt=0, description="a ray counts as passing a cell for add_max_passed_fraction "
+        "only if it ends this far beyond it")
     add_min_free_fraction: float = Field(
         0.5, ge=0, le=1, description="of a new object's cells, free in the static map")

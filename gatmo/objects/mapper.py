@@ -111,6 +111,7 @@ class GatmoMapper:
         self._meta: list[Metaobject] = []
         self._next_meta = 1
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
+        self._passed = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._unexplained = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._unexplained_dilated: np.ndarray | None = None
         # returns this run not explained by walls or other structure (on or near an object, or
@@ -122,7 +123,7 @@ class GatmoMapper:
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "absence_vetoed": 0,
-                       "gamma_unverified": 0}
+                       "gamma_unverified": 0, "gamma_gone": 0}
         self._ms: list[float] = []
         self._beams = None
         self._view: tuple | None = None  # the scan being tracked (Metaobject.views)
@@ -224,6 +225,7 @@ class GatmoMapper:
         self.run = int(run_id)
         self._meta = []
         self._free[:] = 0
+        self._passed[:] = 0
         self._unexplained[:] = 0
         self._unexplained_dilated = None
         self._near_returns[:] = 0
@@ -242,6 +244,12 @@ class GatmoMapper:
                 continue
             c = self._grid.world_to_cell(o.cells_world())
             ok = self._grid.in_bounds(c)
+            # beyond the paper: where rays went on well past its cells after the last return
+            # landed there, it has gone again (a person who stood a while, a cart wheeled off)
+            if ok.any() and np.mean(self._passed[c[ok, 1], c[ok, 0]] >= self.cfg.match_free_rays
+                                    ) > self.cfg.add_max_passed_fraction:
+                self.counts["gamma_gone"] += 1
+                continue
             overlap = np.mean(taken[c[ok, 1], c[ok, 0]]) if ok.any() else 1.0
             if overlap > 0.3:
                 continue
@@ -458,6 +466,7 @@ class GatmoMapper:
         okh = g.in_bounds(hit_cells)
         # a return is stronger evidence than rays passing: cells with returns are not free
         self._free[hit_cells[okh, 1], hit_cells[okh, 0]] = 0
+        self._passed[hit_cells[okh, 1], hit_cells[okh, 0]] = 0
         hit_own = self._owner[hit_cells[okh, 1], hit_cells[okh, 0]]
         hit_loc = self._local[hit_cells[okh, 1], hit_cells[okh, 0]]
         for i in np.unique(hit_own[hit_own >= 0]):
@@ -503,6 +512,10 @@ class GatmoMapper:
         if not len(cells):
             return
         np.add.at(self._free, (cells[:, 1], cells[:, 0]), 1)
+        # rays that went on well beyond a cell: the evidence that a new object is gone again
+        # (a chair grid smeared by pose jitter has cells just in front of the surface)
+        beyond = np.hypot(*(g.cell_to_world(cells) - ends[ray]).T) > self.cfg.add_gone_beyond_m
+        np.add.at(self._passed, (cells[beyond, 1], cells[beyond, 0]), 1)
         objs = self.object_map.objects
         own = self._owner[cells[:, 1], cells[:, 0]]
         for i in np.unique(own[own >= 0]):

@@ -830,3 +830,32 @@ def test_a_person_walking_through_the_room_never_becomes_a_map_object():
     added = [o for o in m.object_map.objects if o.status == "M" and not o.structure]
     assert len(added) == 1  # the box, not the legs
     assert np.hypot(*(added[0].cells_world().mean(0) - [6.25, 4.85])) < 0.2
+
+
+@pytest.mark.parametrize("pose_noise_m", [0.0, 0.05])
+def test_a_thing_that_stood_a_while_and_left_is_not_added(pose_noise_m):
+    """A 0.4 m box (a cart, a person with a bag) stands in front of the robot for 4 s and is
+    then gone while the robot keeps looking at its place for 8 s more: GATMO saw it (Gamma)
+    but does not add it at the end of the run, since rays went on well past its cells after
+    the last return landed there; a box standing all run is added, also when GATMO's poses
+    jitter by 5 cm and 1.25 deg (std), which smears its chair grid in front of its surface
+    (counting every ray that crossed a cell, as the free-space test does, it was dropped)."""
+    rng = np.random.default_rng(0)
+    m = GatmoMapper.from_config(CFG, room_grid(10, 6, 0.05))
+    m.begin_run(1)
+    events = []
+    for i in range(120):
+        t = 0.1 * i
+        boxes = [(6.0, 4.6, 6.5, 5.1)] + ([(3.8, 1.8, 4.2, 2.2)] if t < 4.0 else [])
+        world = room_grid(10, 6, 0.05, boxes=boxes)
+        pose = np.array([1.5 + 0.02 * i, 3.5, -0.3])
+        s = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0, stamp_s=t)
+        noise = rng.normal(0.0, [pose_noise_m, pose_noise_m, np.radians(25 * pose_noise_m)])
+        events += m.update(pose + noise, s, pose_confident=True, stamp_s=t)
+    events += m.end_run()
+    seen = {e.object_id: np.array(e.pose_new[:2]) for e in events if e.kind == "gamma"}
+    added = [e.object_id for e in events if e.kind == "added"]
+    assert len(seen) == 2 and len(added) == 1 and m.counts["gamma_gone"] == 1
+    assert np.hypot(*(seen[added[0]] - [6.25, 4.85])) < 0.3  # the box that stayed
+    (gone,) = set(seen) - set(added)
+    assert np.hypot(*(seen[gone] - [4.0, 2.0])) < 0.2
