@@ -243,22 +243,23 @@ class GatmoMapper:
             if len(o.shape_xy) < self.cfg.add_min_cells:
                 continue
             c = self._grid.world_to_cell(o.cells_world())
-            ok = self._grid.in_bounds(c)
+            c = c[self._grid.in_bounds(c)]
+            if not len(c):  # off the map
+                continue
+            cy, cx = c[:, 1], c[:, 0]
             # beyond the paper: where rays went on well past its cells after the last return
             # landed there, it has gone again (a person who stood a while, a cart wheeled off)
-            if ok.any() and np.mean(self._passed[c[ok, 1], c[ok, 0]] >= self.cfg.match_free_rays
-                                    ) > self.cfg.add_max_passed_fraction:
+            if np.mean(self._passed[cy, cx] >= self.cfg.match_free_rays
+                       ) > self.cfg.add_max_passed_fraction:
                 self.counts["gamma_gone"] += 1
                 continue
-            overlap = np.mean(taken[c[ok, 1], c[ok, 0]]) if ok.any() else 1.0
-            if overlap > 0.3:
+            if np.mean(taken[cy, cx]) > 0.3:
                 continue
             # beyond the paper: returns in space the static map never knew (through a window,
             # an open door, past the mapped area) are the unmapped world, not new furniture
-            known = np.mean(self.base.cells[c[ok, 1], c[ok, 0]] == FREE) if ok.any() else 0.0
-            if known < self.cfg.add_min_free_fraction:
+            if np.mean(self.base.cells[cy, cx] == FREE) < self.cfg.add_min_free_fraction:
                 continue
-            taken[c[ok, 1], c[ok, 0]] = True
+            taken[cy, cx] = True
             o.status = "M"
             o.record(self.run, self._last_stamp)
             events.append(Event(self._last_stamp, self.run, "added", o.id, o.label, None,
