@@ -117,7 +117,9 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
             o = om.by_id[p2o[c["id"]]]
             rel = [e for e in events if e["kind"] == "relocated" and e["object_id"] == o.id]
             kind = piece_outcome(o, c["id"], doc["map_objects"], run["objects"], events)
-            out.append({"run": k + 1, "label": c["label"], "outcome": kind,
+            old_xy, new_xy = np.asarray(c["old_pose"][:2]), np.asarray(c["new_pose"][:2])
+            out.append({"run": k + 1, "label": c["label"], "outcome": kind, "kind": c["kind"],
+                        "moved_m": round(float(np.linalg.norm(new_xy - old_xy)), 3),
                         "observed": observed(scans, prev[c["id"]], cur.get(c["id"])),
                         "scan": rel[-1]["scan_index"] if rel else None})
         prev = cur

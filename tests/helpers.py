@@ -39,6 +39,20 @@ def room_grid(
     return grid
 
 
+def with_rotated_box(grid: OccupancyGrid, centre_xy: tuple[float, float], length_m: float,
+                     width_m: float, yaw_rad: float) -> OccupancyGrid:
+    """A copy of ``grid`` with the cells whose centres lie in a ``length_m`` x ``width_m`` box,
+    centred at ``centre_xy`` and turned by ``yaw_rad``, occupied."""
+    out = grid.copy()
+    iy, ix = np.mgrid[0 : grid.cells.shape[0], 0 : grid.cells.shape[1]]
+    d = grid.cell_to_world(np.stack([ix.ravel(), iy.ravel()], axis=1)) - np.asarray(centre_xy)
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    inside = (np.abs(d[:, 0] * c + d[:, 1] * s) <= length_m / 2) & \
+        (np.abs(-d[:, 0] * s + d[:, 1] * c) <= width_m / 2)
+    out.cells.ravel()[inside] = OCCUPIED
+    return out
+
+
 def march_ranges(
     grid: OccupancyGrid,
     sensor_pose_xytheta: np.ndarray,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import Field
 
 from gatmo.config import GatmoModel
@@ -114,6 +116,10 @@ class GatmoConfig(GatmoModel):
     match_free_first: bool = Field(
         True, description="beyond the paper: of the alignments a partial view allows, the best "
         "that covers no space seen free (else the best, then refused)")
+    match_free_from: Literal["run", "views"] = Field(
+        "run", description="the free-space test of a chair's match: rays of the whole run "
+        "(match_free_rays, match_max_free_fraction), or the beams of the scans that saw the "
+        "chair (match_through_m, match_max_through_fraction), which share its pose errors")
     match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
     match_max_free_fraction: float = Field(0.05, ge=0, le=1)
     match_edge_sigma_m: float = Field(0.05, gt=0)
@@ -132,6 +138,27 @@ class GatmoConfig(GatmoModel):
         False, description="a chair is matched to map objects on the evidence grid of the "
         "scans from independently confirmed poses (pose_verified) only; every scan still "
         "feeds the track, its person / chair verdict and new objects")
+    nudge: bool = Field(
+        True, description="beyond the paper: an object whose returns miss its outline while "
+        "the rest of the scan fits the map (a piece shifted by less than its size) is matched "
+        "onto those returns and relocated (GatmoMapper._nudge)")
+    nudge_radius_m: float = Field(
+        0.6, gt=0, description="returns this near an object, nearer to it than to anything "
+        "else, are its own for the nudge")
+    nudge_min_off_fraction: float = Field(
+        0.3, gt=0, le=1, description="of an object's returns in a scan, the fraction more "
+        "than offset_min_m off its outline for the scan to count against its place")
+    nudge_min_scans: int = Field(5, ge=1, description="such scans before (and between) tries")
+    nudge_min_cell_scans: int = Field(
+        2, ge=1, description="a cell joins the returns the object is matched onto when hit "
+        "in this many of those scans (people walking past are not)")
+    nudge_min_gain: float = Field(
+        0.15, ge=0, description="the match must score this much above the object's current "
+        "pose")
+    nudge_min_shift_m: float = Field(
+        0.15, ge=0, description="a match whose footprint moves less (mean cell distance) is "
+        "no shift: pose jitter of a few cm smears the returns by as much")
+    nudge_max_shift_m: float = Field(1.0, gt=0, description="farther: not a shift")
     offset_min_returns: int = Field(
         4, ge=1, description="GatmoMapper.offset_at: returns an object needs in a scan before "
         "they can be said to miss it")

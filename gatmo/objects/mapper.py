@@ -123,9 +123,10 @@ class GatmoMapper:
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "absence_vetoed": 0,
-                       "gamma_unverified": 0, "gamma_gone": 0}
+                       "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0}
         self._ms: list[float] = []
         self._beams = None
+        self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
         self._view: tuple | None = None  # the scan being tracked (Metaobject.views)
         self._reset_run_evidence()
         self._build_owner()
@@ -150,6 +151,13 @@ class GatmoMapper:
         self._gamma_this_run: set[int] = set()  # Gamma objects seen this run
         # per (object id, test): how often a chair was refused as this object this run
         self.refusals: dict[tuple[int, str], int] = {}
+        # the nudge (beyond the paper): per object id, the cells (ix, iy) returns that missed
+        # it landed on -> in how many scans, the scans, their views, and the scans at the
+        # last try
+        self._nudge_cells: dict[int, dict[tuple[int, int], int]] = {}
+        self._nudge_scans: dict[int, int] = {}
+        self._nudge_views: dict[int, list] = {}
+        self._nudge_tried: dict[int, int] = {}
 
     # ------------------------------------------------------------------ maps
     def grid(self) -> OccupancyGrid:
@@ -270,10 +278,12 @@ class GatmoMapper:
 
     # ---------------------------------------------------------------- update
     def update(self, pose_xytheta, scan: Scan, *, pose_confident: bool,
-               stamp_s: float, pose_verified: bool = True) -> list[Event]:
+               stamp_s: float, pose_verified: bool = True, track: bool = True) -> list[Event]:
         """One scan from the base pose (map frame). Returns what changed. ``pose_verified``:
         the pose was confirmed by an independent check (scan-to-map alignment), not only by
-        the filter's covariance; new objects need some scans from such poses."""
+        the filter's covariance; new objects need some scans from such poses. ``track``
+        False: the scan is evidence of absence and presence only; its unexplained returns
+        are counted (:meth:`unexplained_at`) but feed no metaobject."""
         t0 = time.perf_counter()
         self._last_stamp = float(stamp_s)
         events: list[Event] = []
@@ -320,7 +330,9 @@ class GatmoMapper:
         self._view = (lp, scan.angles_rad, scan.ranges_m,
                       min(scan.range_max_m, self.cfg.absence_max_range_m)
                       - self.cfg.match_through_m)
-        if pose_verified or not self.cfg.track_from_verified_only:
+        if self.cfg.nudge and pose_verified:
+            self._nudge(pts, lp, scan, stamp_s, events)
+        if track and (pose_verified or not self.cfg.track_from_verified_only):
             self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
                         verified=bool(pose_verified))
         self._expire(stamp_s, events)
@@ -396,6 +408,95 @@ class GatmoMapper:
             return out
         out[idx[odd]] = True
         return out
+
+    def _nudge(self, pts: np.ndarray, lp: np.ndarray, scan: Scan, stamp_s, events) -> None:
+        """Beyond the paper: a piece shifted by less than its own size. Its old cells are still
+        partly where it stands, so few rays pass through them (no absence), and its returns
+        lie within delta_W of its outline (explained: no chair hypothesis forms). What shows
+        it is that the beams the map expects to end on it end elsewhere while the rest of
+        the scan fits the map (as :meth:`offset_at`). Per object, the returns within
+        ``nudge_radius_m`` whose nearest map cell is its own are gathered over the scans in
+        which at least ``nudge_min_off_fraction`` of its beams end more than
+        ``offset_min_m`` before or beyond where the map has it (a return inside its old
+        outline is near it, but a beam cannot end there if it stood there); after
+        ``nudge_min_scans`` such scans the object is matched onto the cells hit in
+        ``nudge_min_cell_scans`` of them (:func:`match_points`, as a chair would be) and
+        relocated, keeping its id, if the match passes the chair tests (score, free space,
+        enough of it seen, the beams of those scans) and beats its current pose."""
+        c = self.cfg
+        g = self._grid
+        cells = g.world_to_cell(pts)
+        ok = g.in_bounds(cells) & (np.hypot(*(pts - lp[:2]).T) <= c.absence_max_range_m)
+        if ok.sum() < 4 * c.offset_min_returns:
+            return
+        cells = cells[ok]
+        dist = self._near_dist[cells[:, 1], cells[:, 0]]
+        owner = self._near_owner[cells[:, 1], cells[:, 0]]
+        objs = self.object_map.objects
+        cand = (dist <= c.nudge_radius_m) & (owner >= 0)
+        rest = dist <= c.absence_near_m
+        beam_own = self._beams[0]
+        residual = np.where(scan.valid, scan.ranges_m, np.inf) - self._expected
+        near_beams = self._expected <= c.absence_max_range_m
+        odd = []
+        for i in np.unique(owner[cand]):
+            o = objs[int(i)]
+            if o.structure or o.status not in ("U", "M") or not self._distinctive(o):
+                continue
+            mine = cand & (owner == i)
+            expect = near_beams & (beam_own == i)
+            if mine.sum() < c.offset_min_returns or expect.sum() < c.offset_min_returns:
+                continue
+            if np.mean(np.abs(residual[expect]) > c.offset_min_m) >= c.nudge_min_off_fraction:
+                odd.append((o, mine))
+                rest &= ~mine
+        if not odd or rest.sum() < 2 * c.offset_min_returns:
+            return
+        if np.mean(dist[rest] <= c.offset_fit_m) < c.offset_min_fit_fraction:
+            return  # the scan as a whole misses the map: the pose, not an object, is off
+        tries = []
+        for o, mine in odd:
+            hits = self._nudge_cells.setdefault(o.id, {})
+            for key in set(map(tuple, cells[mine].tolist())):
+                hits[key] = hits.get(key, 0) + 1
+            n = self._nudge_scans[o.id] = self._nudge_scans.get(o.id, 0) + 1
+            views = self._nudge_views.setdefault(o.id, [])
+            if self._view is not None:
+                views.append(self._view)
+                del views[:-30]
+            if n >= c.nudge_min_scans and n - self._nudge_tried.get(o.id, 0) >= c.nudge_min_scans:
+                self._nudge_tried[o.id] = n
+                tries.append(o)
+        for o in tries:
+            mt = self._nudge_fit(o)
+            if mt is not None and o.status in ("U", "M"):
+                # _relocate clears the object's evidence, the nudge's included
+                self._relocate(o, mt, stamp_s, events, support_scans=self._nudge_scans[o.id])
+                self.counts["nudged"] += 1
+
+    def _nudge_fit(self, o: MapObject):
+        """The match of ``o`` onto the returns gathered by :meth:`_nudge`, or None."""
+        c = self.cfg
+        hits = self._nudge_cells.get(o.id, {})
+        keys = np.array([k for k, v in hits.items() if v >= c.nudge_min_cell_scans])
+        if len(keys) < max(c.chair_min_cells, c.match_min_edge_fraction * len(o.edge_xy)):
+            return None
+        pts = self._grid.cell_to_world(keys)
+        if _diameter(pts) > _diameter(o.shape_xy) + 3 * o.resolution_m:
+            return None
+        views = self._nudge_views.get(o.id, [])
+        mt = self._match(pts, o, views)
+        now = self._field(o).score(transform_points(inverse(o.pose_xytheta), pts))
+        if (mt.score < c.match_min_score or mt.score < now + c.nudge_min_gain
+                or _footprint_shift_m(o, o.pose_xytheta, mt.pose_xytheta) <= c.nudge_min_shift_m
+                or np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > c.nudge_max_shift_m
+                or not self._free_ok(o, mt, views)):
+            return None
+        sup, con = beam_consistency(o, mt.pose_xytheta, views, c.hit_tolerance_m,
+                                    c.match_through_m)
+        if con > c.match_max_through_fraction * (sup + con):
+            return None
+        return mt
 
     def _owned_by_doubted(self, owner: np.ndarray) -> np.ndarray:
         """(N,) bool: which entries of ``owner`` (object indices, < 0 for none) are in doubt."""
@@ -532,7 +633,7 @@ class GatmoMapper:
         predicts against the measured ones; beams ending short of it (occluded) are neither."""
         c = self.cfg
         g = self._grid
-        expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
+        self._expected = expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
         r = scan.ranges_m
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(r) & (r >= scan.range_min_m)
@@ -612,7 +713,8 @@ class GatmoMapper:
 
     def _clear_evidence(self, oid: int) -> None:
         for d in (self._seen, self._rays, self._through, self._hits, self._front,
-                  self._front_through):
+                  self._front_through, self._nudge_cells, self._nudge_scans, self._nudge_views,
+                  self._nudge_tried):
             d.pop(oid, None)
         self._doubt.discard(oid)
 
@@ -795,10 +897,10 @@ class GatmoMapper:
             return "larger"  # what is seen is larger than the object
         if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
             return "too_little"  # too little of the object seen yet to tell look-alikes apart
-        mt = self._match(pts, o)
+        mt = self._match(pts, o, m.views)
         if mt.score < self.cfg.match_min_score:
             return "score"
-        if not self._free_consistent(o, mt):
+        if not self._free_ok(o, mt, m.views):
             return "free_space"
         # every return the track ever had must fit too, or this is a part of something
         # larger (a desk's corner looks like a footstool's)
@@ -907,11 +1009,28 @@ class GatmoMapper:
                                          self.cfg.absence_near_m, own_index=idx)
         return inside + near >= self.cfg.absence_near_min_cells
 
-    def _match(self, pts: np.ndarray, o: MapObject):
+    def _match(self, pts: np.ndarray, o: MapObject, views: list | None = None):
         """``o`` matched onto the chair points ``pts`` (P, 2) (map frame): its edge field,
-        its yaw as the prior, and with ``match_free_first`` the free-space test choosing."""
+        its yaw as the prior, and with ``match_free_first`` the free-space test choosing
+        (:meth:`_free_ok`; ``views``: the scans that saw the points)."""
+        def free(pose: np.ndarray) -> bool:
+            return self._free_ok(o, SimpleNamespace(pose_xytheta=pose), views)
+
         return match_points(pts, o, self.cfg, self._field(o), prior_yaw=o.pose_xytheta[2],
-                            accept=self._free_accept(o) if self.cfg.match_free_first else None)
+                            accept=free if self.cfg.match_free_first else None)
+
+    def _free_ok(self, o: MapObject, mt, views: list | None) -> bool:
+        """The free-space test of a match: :meth:`_free_consistent` (rays of the whole run),
+        or with ``match_free_from: views`` and the scans that saw the chair (``views``), that
+        few of their beams went on well past the object placed there
+        (:func:`beam_consistency`). Beyond the paper: a tenth of the poses a rearranged room
+        leaves the stack are 0.1-0.3 m off (the furniture in view pulled them), and their rays
+        cross where a piece now stands; the scans that saw the chair share its pose errors."""
+        if self.cfg.match_free_from == "run" or views is None:
+            return self._free_consistent(o, mt)
+        sup, con = beam_consistency(o, mt.pose_xytheta, views, self.cfg.hit_tolerance_m,
+                                    self.cfg.match_through_m)
+        return con <= self.cfg.match_max_through_fraction * max(sup + con, 1)
 
     def _fit_gamma(self, g: MapObject, o: MapObject):
         """The match of ``o`` onto the Gamma object ``g`` (a chair seen, never added), or
@@ -935,10 +1054,6 @@ class GatmoMapper:
         only matched near where it was; and a pose error of a few cm is its own size, so rays
         pass through it while it stands there: it is absent only with no returns around it."""
         return len(o.shape_xy) * o.resolution_m**2 >= self.cfg.small_object_area_m2
-
-    def _free_accept(self, o: MapObject):
-        """``pose -> bool``: :meth:`_free_consistent` for ``o`` at a pose (match_points)."""
-        return lambda pose: self._free_consistent(o, SimpleNamespace(pose_xytheta=pose))
 
     def _free_consistent(self, o: MapObject, mt) -> bool:
         """Beyond the paper: the object at the matched pose must not cover cells that rays

@@ -140,10 +140,14 @@ class FusionConfig(GatmoModel):
     align_tight_m: float = Field(0.05, gt=0)
     align_min_tight_fraction: float = Field(0.0, ge=0, le=1)
     verified_suffices: bool = False
+    verified_track: bool = True
     mask_unexplained: bool = True
     mask_doubted: bool = False
     mask_offset_objects: bool = True
     gatmo_pose_gain: float = Field(1.0, gt=0, le=1)
+    motion_from_matcher: bool = False
+    matcher_motion_max_gap_m: float = Field(0.2, gt=0)
+    matcher_motion_max_gap_deg: float = Field(10.0, gt=0)
 
 
 @dataclass
@@ -274,9 +278,11 @@ class LocalizationStack:
         self.n_scans = 0
         self.n_map_updates = 0
         self.n_masked = 0  # returns withheld from the localizer (mask_unexplained)
+        self.n_matcher_motion_rejected = 0  # matcher increments replaced by the wheels'
         self._aligner: MapAligner | None = None
         self._last_loc: np.ndarray | None = None
         self._last_odom: np.ndarray | None = None
+        self._motion: tuple | None = None
         self._last_precise = False  # the last estimate passed GATMO's strict confidence test
         self._settle_left_m = 0.0
         self._injected_seen = 0  # the localizer's random particles counted so far
@@ -288,6 +294,7 @@ class LocalizationStack:
         self._travel_since_reset_m = np.inf
         self._last_pose = None
         self._last_loc = self._last_odom = None
+        self._motion = None  # (odometry chain, matcher pose, wheel odometry) of the last scan
         self._last_precise = False
         self._settle_left_m = 0.0
         self._gatmo_last = None
@@ -314,6 +321,9 @@ class LocalizationStack:
     def step(self, scan: Scan) -> StackStep:
         """Process one scan; see the module docstring for the order of work."""
         t0 = time.perf_counter()
+        match = self.matcher.register(scan) if self.matcher is not None else None
+        if match is not None and self.fusion.motion_from_matcher:
+            scan = self._with_matcher_motion(scan, np.asarray(match.pose_xytheta, dtype=float))
         est = self.localizer.update(scan.odom_pose_xytheta, self._masked(scan))
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)
         confident = is_confident(est, self.fusion)
@@ -339,8 +349,7 @@ class LocalizationStack:
         reset = False
         pose = loc_pose
         base_ref = odom  # where the base is in a locally precise frame (odometry, or ICP's)
-        if self.matcher is not None:
-            match = self.matcher.register(scan)
+        if match is not None:
             T_match_base = np.asarray(match.pose_xytheta, dtype=float)
             base_ref = T_match_base
             if self.T_map_match is None or confident:
@@ -390,6 +399,7 @@ class LocalizationStack:
             pose_ok = pose_ok and self._settle_left_m <= 0.0
             map_pose = pose
             verified = pose_ok
+            track = True
             if self.fusion.align_to_map and self._aligner is None:
                 self._aligner = MapAligner(self.fusion)
                 self._aligner.set_grid(self.mapper.grid())
@@ -404,13 +414,15 @@ class LocalizationStack:
                 refined, _ = self._aligner.refine(pose, scan)
                 if self._aligner.last_verified:
                     map_pose, pose_ok, verified = refined, True, True
+                    track = self.fusion.verified_track
             if pose_ok:
                 map_pose = gatmo_pose = self._smoothed(np.asarray(map_pose, dtype=float),
                                                        base_ref)
             else:
                 self._gatmo_last = None
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
-                                        stamp_s=scan.stamp_s, pose_verified=verified)
+                                        stamp_s=scan.stamp_s, pose_verified=verified,
+                                        track=track)
             for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
                 self.localizer.update_map_region(cells_new, ix0, iy0)
                 changed = True
@@ -431,6 +443,28 @@ class LocalizationStack:
             ms=(time.perf_counter() - t0) * 1e3,
             gatmo_pose_xytheta=gatmo_pose,
         )
+
+    def _with_matcher_motion(self, scan: Scan, T_match_base: np.ndarray) -> Scan:
+        """``scan`` with its odometry replaced by a chain of the scan matcher's increments
+        (``motion_from_matcher``), each checked against the wheels' increment: one that
+        differs by more than ``matcher_motion_max_gap_m`` / ``_deg`` (the matcher slipped on
+        a scan full of people) is replaced by the wheels' own."""
+        wheels = np.asarray(scan.odom_pose_xytheta, dtype=float)
+        if self._motion is None:
+            chain = wheels.copy()
+        else:
+            last_chain, last_match, last_wheels = self._motion
+            inc = relative(last_match, T_match_base)
+            inc_w = relative(last_wheels, wheels)
+            gap = inc - inc_w
+            f = self.fusion
+            if (np.hypot(gap[0], gap[1]) > f.matcher_motion_max_gap_m
+                    or abs(wrap_angle(gap[2])) > np.radians(f.matcher_motion_max_gap_deg)):
+                inc = inc_w
+                self.n_matcher_motion_rejected += 1
+            chain = compose(last_chain, inc)
+        self._motion = (chain, T_match_base.copy(), wheels)
+        return replace(scan, odom_pose_xytheta=chain)
 
     def _smoothed(self, map_pose: np.ndarray, base_ref: np.ndarray) -> np.ndarray:
         """The pose handed to GATMO (``gatmo_pose_gain``): the last one carried by the local

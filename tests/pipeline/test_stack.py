@@ -102,7 +102,7 @@ def test_default_publishes_the_localizer_pose_and_gives_gatmo_the_fused_one():
         def begin_run(self, run_id):
             pass
 
-        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True):
+        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
             self.poses.append(np.asarray(pose, dtype=float))
             return []
 
@@ -190,7 +190,7 @@ class RecordingMapper:
     def begin_run(self, run_id):
         pass
 
-    def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True):
+    def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
         self.trusted.append(pose_confident)
         self.verified.append(pose_verified)
         return []
@@ -481,3 +481,56 @@ def test_returns_of_a_box_shifted_a_decimetre_are_withheld_with_mask_offset_obje
                 assert withheld == 1.0, k
             else:  # only the few that mask_unexplained withholds (beyond delta_W)
                 assert withheld < 0.3, (flag, confident, k, withheld)
+
+
+class OdomRecordingLocalizer(ScriptedLocalizer):
+    """A scripted localizer that keeps the odometry poses it was handed."""
+
+    def __init__(self, truth):
+        super().__init__(truth, confident_at=[])
+        self.odom = []
+
+    def update(self, odom, scan):
+        self.odom.append(np.asarray(odom, dtype=float))
+        return super().update(odom, scan)
+
+
+class SlippingMatcher(DriftingMatcher):
+    """Exact in its own frame but for one scan, where it slips by 1 m and comes back."""
+
+    def __init__(self, truth, T_match_map, slip_at):
+        super().__init__(truth, T_match_map)
+        self.slip_at = slip_at
+
+    def register(self, scan):
+        m = super().register(scan)
+        if self.i - 1 == self.slip_at:
+            m.pose_xytheta = m.pose_xytheta + np.array([1.0, 0.0, 0.0])
+        return m
+
+
+@pytest.mark.parametrize("from_matcher", [False, True])
+def test_the_localizer_can_take_its_motion_from_the_scan_matcher(from_matcher):
+    """Wheel odometry 5 % long (a run's scale bias) against a scan matcher exact in its own
+    frame, which slips by 1 m on scan 12: with ``motion_from_matcher`` the localizer is handed
+    the matcher's increments, the slipped ones (more than 0.2 m from the wheels') replaced by
+    the wheels'; without it, the wheels' odometry as is."""
+    truth = _truth()
+    n = len(truth)
+    wheels = [compose(truth[0], relative(truth[0], t) * [1.05, 1.05, 1.0]) for t in truth]
+    scans = [make_scan(room_grid(), (2.0, 2.0, 0.0), n_beams=5, stamp_s=float(i),
+                       odom_pose_xytheta=wheels[i]) for i in range(n)]
+    loc = OdomRecordingLocalizer(truth)
+    stack = LocalizationStack(loc, SlippingMatcher(truth, (10.0, -4.0, 1.0), slip_at=12), None,
+                              FusionConfig(motion_from_matcher=from_matcher))
+    stack.begin_run(1)
+    for s in scans:
+        stack.step(s)
+    for i in range(1, n):
+        got = relative(loc.odom[i - 1], loc.odom[i])
+        wheel = relative(wheels[i - 1], wheels[i])
+        true = relative(truth[i - 1], truth[i])
+        slipped = from_matcher and i in (12, 13)
+        np.testing.assert_allclose(got, wheel if not from_matcher or slipped else true,
+                                   atol=1e-9)
+    assert stack.n_matcher_motion_rejected == (2 if from_matcher else 0)
