@@ -113,7 +113,10 @@ def test_map_census_counts_duplicates_stale_objects_and_unmapped_pieces():
                     obj(2, [2.02, 4.0, 0.0], [0.0, 0.0, 0.0]),  # added again on piece 7
                     obj(3, [5.0, 3.0, 0.0], [6.0, 1.0, 0.0]),  # on piece 8
                     obj(4, [6.0, 1.0, 0.0], [6.0, 1.0, 0.0]),  # tied, left where 8 stood
-                    obj(5, [3.0, 6.0, 0.0], [3.0, 6.0, 0.0])],  # untied, never moved
+                    obj(5, [3.0, 6.0, 0.0], [3.0, 6.0, 0.0]),  # untied, never moved
+                    # untied, "restored" 3 cm by a match: still where the map has it
+                    obj(10, [8.03, 6.0, 0.0], [8.0, 6.0, 0.0]),
+                    obj(11, [5.0, 6.3, 0.0], [5.0, 6.0, 0.0])],  # untied, shifted 0.3 m
                    0.05)
     om.objects[3].status = "U"
     gone = obj(6, [8.0, 1.0, 0.0], [8.0, 1.0, 0.0])
@@ -121,5 +124,5 @@ def test_map_census_counts_duplicates_stale_objects_and_unmapped_pieces():
     om.objects.append(gone)
     scen = {"runs": [{"objects": layout}]}
     c = map_census(om, {1: 7, 3: 8, 4: 8, 6: 9}, scen, 1)
-    assert c == {"on_piece": 2, "duplicate": 1, "stale": 1, "fixed": 1, "pieces": 3,
+    assert c == {"on_piece": 2, "duplicate": 1, "stale": 2, "fixed": 2, "pieces": 3,
                  "pieces_unmapped": 1}
