@@ -432,28 +432,9 @@ class GatmoMapper:
         cells = cells[ok]
         dist = self._near_dist[cells[:, 1], cells[:, 0]]
         owner = self._near_owner[cells[:, 1], cells[:, 0]]
-        objs = self.object_map.objects
-        cand = (dist <= c.nudge_radius_m) & (owner >= 0)
-        rest = dist <= c.absence_near_m
-        beam_own = self._beams[0]
-        residual = np.where(scan.valid, scan.ranges_m, np.inf) - self._expected
-        near_beams = self._expected <= c.absence_max_range_m
-        odd = []
-        for i in np.unique(owner[cand]):
-            o = objs[int(i)]
-            if o.structure or o.status not in ("U", "M") or not self._distinctive(o):
-                continue
-            mine = cand & (owner == i)
-            expect = near_beams & (beam_own == i)
-            if mine.sum() < c.offset_min_returns or expect.sum() < c.offset_min_returns:
-                continue
-            if np.mean(np.abs(residual[expect]) > c.offset_min_m) >= c.nudge_min_off_fraction:
-                odd.append((o, mine))
-                rest &= ~mine
-        if not odd or rest.sum() < 2 * c.offset_min_returns:
+        odd = self._objects_off(dist, owner, self._beams[0], scan, self._expected)
+        if not odd:
             return
-        if np.mean(dist[rest] <= c.offset_fit_m) < c.offset_min_fit_fraction:
-            return  # the scan as a whole misses the map: the pose, not an object, is off
         tries = []
         for o, mine in odd:
             hits = self._nudge_cells.setdefault(o.id, {})
@@ -473,6 +454,80 @@ class GatmoMapper:
                 # _relocate clears the object's evidence, the nudge's included
                 self._relocate(o, mt, stamp_s, events, support_scans=self._nudge_scans[o.id])
                 self.counts["nudged"] += 1
+
+    def _objects_off(self, dist: np.ndarray, owner: np.ndarray, beam_owner: np.ndarray,
+                     scan: Scan, expected: np.ndarray) -> list[tuple[MapObject, np.ndarray]]:
+        """The objects whose beams miss them while the rest of the scan fits the map, each with
+        its returns: [(object, (N,) bool)]. ``dist``, ``owner`` (N,): per return, the distance
+        to the nearest map cell and its owner (``_near_dist``, ``_near_owner``);
+        ``beam_owner`` (B,): per beam, the owner of the cell the map expects it to end on
+        (:meth:`_classify_beams`), ``expected`` (B,) that range [m]. An object's returns are
+        those within ``nudge_radius_m`` whose nearest map cell is its own; it is off when at
+        least ``nudge_min_off_fraction`` of the beams the map expects to end on it (within
+        ``absence_max_range_m``) end more than ``offset_min_m`` before or beyond it (a return
+        inside its old outline is near it, but a beam cannot end there if it stood there).
+        Empty unless the scan's other returns near the map fit it (at least
+        ``offset_min_fit_fraction`` within ``offset_fit_m``): otherwise the pose is off."""
+        c = self.cfg
+        objs = self.object_map.objects
+        cand = (dist <= c.nudge_radius_m) & (owner >= 0)
+        rest = dist <= c.absence_near_m
+        residual = np.where(scan.valid, scan.ranges_m, np.inf) - expected
+        near_beams = expected <= c.absence_max_range_m
+        odd = []
+        for i in np.unique(owner[cand]):
+            o = objs[int(i)]
+            if o.structure or o.status not in ("U", "M") or not self._distinctive(o):
+                continue
+            mine = cand & (owner == i)
+            expect = near_beams & (beam_owner == i)
+            if mine.sum() < c.offset_min_returns or expect.sum() < c.offset_min_returns:
+                continue
+            if np.mean(np.abs(residual[expect]) > c.offset_min_m) >= c.nudge_min_off_fraction:
+                odd.append((o, mine))
+                rest &= ~mine
+        if not odd or rest.sum() < 2 * c.offset_min_returns:
+            return []
+        if np.mean(dist[rest] <= c.offset_fit_m) < c.offset_min_fit_fraction:
+            return []  # the scan as a whole misses the map: the pose, not an object, is off
+        return odd
+
+    def beams_off_at(self, laser_pose_xytheta: np.ndarray, scan: Scan) -> np.ndarray:
+        """(V,) bool over the scan's valid beams (``scan.valid``): the returns, seen from the
+        laser at ``laser_pose_xytheta`` (map frame, a predicted pose), of the objects whose
+        beams miss them while the rest of the scan fits the map (:meth:`_objects_off`, the
+        nudge's test). Beyond the paper, for the localizer: a piece shifted or turned by less
+        than its size returns partly inside its old outline, so the median distance of its
+        returns to the map (:meth:`offset_at`) stays near zero while the rest pulls the
+        particles towards its old place; its beams ending before or beyond it show it (a beam
+        with no return went on beyond it)."""
+        c = self.cfg
+        g = self._grid
+        lp = np.asarray(laser_pose_xytheta, dtype=float)
+        valid = scan.valid
+        out = np.zeros(int(valid.sum()), dtype=bool)
+        a = lp[2] + scan.angles_rad[valid]
+        r = scan.ranges_m[valid]
+        pts = lp[:2] + r[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
+        cells = g.world_to_cell(pts)
+        ok = g.in_bounds(cells) & (r <= c.absence_max_range_m)
+        if ok.sum() < 4 * c.offset_min_returns:
+            return out
+        idx = np.nonzero(ok)[0]
+        cells = cells[ok]
+        dist = self._near_dist[cells[:, 1], cells[:, 0]]
+        owner = self._near_owner[cells[:, 1], cells[:, 0]]
+        expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
+        u = np.stack([np.cos(lp[2] + scan.angles_rad), np.sin(lp[2] + scan.angles_rad)], axis=1)
+        ends = g.world_to_cell(lp[:2] + (expected[:, None] + g.resolution_m / 2) * u)
+        with np.errstate(invalid="ignore"):  # a no-return beam went on beyond (NaN: nothing)
+            informative = valid | (scan.ranges_m >= scan.range_max_m)
+        hit = informative & (expected < scan.range_max_m) & g.in_bounds(ends)
+        beam_owner = np.full(len(expected), -1)
+        beam_owner[hit] = self._owner[ends[hit, 1], ends[hit, 0]]
+        for _, mine in self._objects_off(dist, owner, beam_owner, scan, expected):
+            out[idx[mine]] = True
+        return out
 
     def _nudge_fit(self, o: MapObject):
         """The match of ``o`` onto the returns gathered by :meth:`_nudge`, or None."""

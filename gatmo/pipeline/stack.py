@@ -107,6 +107,18 @@ class FusionConfig(GatmoModel):
     fell to 6.0 %, but on the Intel log the full stack was then worse than the static
     localizer (0.199 against 0.196 m ATE). See docs/experiments.md.
 
+    ``mask_offset_beams`` (off; needs ``mask_unexplained``) also withholds the returns of
+    an object whose beams miss it (:meth:`gatmo.objects.mapper.GatmoMapper.beams_off_at`,
+    the nudge's test: 30 % of the beams the map expects to end on it end 8 cm or more before
+    or beyond it while the rest of the scan fits the map), while the filter's last estimate
+    passes the paper's reset test (``reset_max_std_*``, not the strict one): a piece shifted
+    or turned by less than its size returns partly inside its old outline, where the median
+    test sees nothing, and the rest of its returns turn the filter. Traced on soak seed 11,
+    run 10: a sofa GATMO placed in run 7, shifted 0.8 m and turned since, 2.6 m from the
+    start, turned the filter's first update 12 deg and the robot was lost for the run (5.6 m
+    median error against the static localizer's 0.2 m); with this mask 0.14 m, never lost.
+    See docs/experiments.md (ninth session).
+
     ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
     estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
     fused pose (then refined against the map) serves GATMO only. ``fused``: the matcher's
@@ -144,6 +156,7 @@ class FusionConfig(GatmoModel):
     mask_unexplained: bool = True
     mask_doubted: bool = False
     mask_offset_objects: bool = True
+    mask_offset_beams: bool = False
     gatmo_pose_gain: float = Field(1.0, gt=0, le=1)
     motion_from_matcher: bool = False
     matcher_motion_max_gap_m: float = Field(0.2, gt=0)
@@ -284,6 +297,7 @@ class LocalizationStack:
         self._last_odom: np.ndarray | None = None
         self._motion: tuple | None = None
         self._last_precise = False  # the last estimate passed GATMO's strict confidence test
+        self._last_confident = False  # ... the paper's reset test (mask_offset_beams)
         self._settle_left_m = 0.0
         self._injected_seen = 0  # the localizer's random particles counted so far
         self._gatmo_last: tuple[np.ndarray, np.ndarray] | None = None  # (pose, base_ref)
@@ -295,7 +309,7 @@ class LocalizationStack:
         self._last_pose = None
         self._last_loc = self._last_odom = None
         self._motion = None  # (odometry chain, matcher pose, wheel odometry) of the last scan
-        self._last_precise = False
+        self._last_precise = self._last_confident = False
         self._settle_left_m = 0.0
         self._gatmo_last = None
         self._injected_seen = _injected(self.localizer)
@@ -346,6 +360,7 @@ class LocalizationStack:
         self._injected_seen = injected
         self._last_loc, self._last_odom = loc_pose, odom
         self._last_precise = is_confident(est, self.fusion, strict=True, require_update=False)
+        self._last_confident = is_confident(est, self.fusion, require_update=False)
         reset = False
         pose = loc_pose
         base_ref = odom  # where the base is in a locally precise frame (odometry, or ICP's)
@@ -504,6 +519,8 @@ class LocalizationStack:
             bad |= self.mapper.doubted_at(pts)
         if self.fusion.mask_offset_objects and self._last_precise:
             bad |= self.mapper.offset_at(pts)
+        if self.fusion.mask_offset_beams and self._last_confident:
+            bad |= self.mapper.beams_off_at(lp, scan)
         self.n_masked += int(bad.sum())
         if not bad.any():
             return scan

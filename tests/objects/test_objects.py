@@ -802,6 +802,31 @@ def test_returns_missing_one_object_by_an_offset_are_singled_out():
     assert not m.offset_at(ends(truth, truth + [0.2, 0.15, 0.0])).any()
 
 
+def test_returns_of_a_piece_turned_within_its_outline_are_singled_out_by_its_beams():
+    """A 1.6 x 0.6 m sofa turned 30 deg about its centre and shifted 0.15 m: seen from the
+    true pose, a third of its returns land inside its old outline (distance 0 to the map), so
+    the median test ``offset_at`` sees nothing, but the beams the map expects to end on it end
+    before or beyond it, and ``beams_off_at`` singles out its returns and nothing else. On
+    the map as it stands, and from a pose 0.2 m off (the walls misfit too), nothing."""
+    from tests.helpers import with_rotated_box
+
+    empty = room_grid(8, 6, 0.05)
+    grid = with_rotated_box(empty, (4.5, 3.0), 1.6, 0.6, 0.0)
+    world = with_rotated_box(empty, (4.5, 3.15), 1.6, 0.6, np.radians(30.0))
+    m = GatmoMapper.from_config(GatmoConfig(), grid)
+    truth = np.array([2.5, 3.0, 0.0])
+    s = make_scan(world, truth, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0)
+    a = truth[2] + s.angles_rad[s.valid]
+    pts = truth[:2] + s.ranges_m[s.valid, None] * np.stack([np.cos(a), np.sin(a)], 1)
+    on_sofa = np.hypot(pts[:, 0] - 4.5, pts[:, 1] - 3.15) < 1.0
+    assert on_sofa.sum() >= 10
+    assert not m.offset_at(pts).any()
+    odd = m.beams_off_at(truth, s)
+    assert odd[on_sofa].mean() > 0.8 and not odd[~on_sofa].any()
+    assert not GatmoMapper.from_config(GatmoConfig(), world).beams_off_at(truth, s).any()
+    assert not m.beams_off_at(truth + [0.2, 0.15, 0.0], s).any()
+
+
 def test_a_person_walking_through_the_room_never_becomes_a_map_object():
     """Two legs (0.1 m squares) walk 4 m at 1 m/s, then leave, in front of a robot that drives
     along with a true pose: GATMO tracks them as a person (counted when the track expires)
