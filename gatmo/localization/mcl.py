@@ -145,6 +145,11 @@ class MonteCarloLocalizer:
         self._reset_particles(pts)
         self._est, self._cov = pose.copy(), cov.copy()
 
+    def estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """The current estimate without a new scan: (pose (3,) map frame [m, m, rad], its
+        covariance (3, 3)); after :meth:`set_initial_pose`, that pose and covariance."""
+        return self._est.copy(), self._cov.copy()
+
     def global_localization(self) -> None:
         """Particles uniform over the free cells, uniform heading."""
         free = self._free_cells()

@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 from typing import Literal
 
 import numpy as np
@@ -117,7 +118,8 @@ class FusionConfig(GatmoModel):
     run 10: a sofa GATMO placed in run 7, shifted 0.8 m and turned since, 2.6 m from the
     start, turned the filter's first update 12 deg and the robot was lost for the run (5.6 m
     median error against the static localizer's 0.2 m); with this mask 0.14 m, never lost.
-    See docs/experiments.md (ninth session).
+    The run's first scan is masked too, from the localizer's initial pose if its covariance
+    passes the same test. See docs/experiments.md (ninth session).
 
     ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
     estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
@@ -298,6 +300,7 @@ class LocalizationStack:
         self._motion: tuple | None = None
         self._last_precise = False  # the last estimate passed GATMO's strict confidence test
         self._last_confident = False  # ... the paper's reset test (mask_offset_beams)
+        self._start: np.ndarray | None = None  # the initial pose the first scan is masked from
         self._settle_left_m = 0.0
         self._injected_seen = 0  # the localizer's random particles counted so far
         self._gatmo_last: tuple[np.ndarray, np.ndarray] | None = None  # (pose, base_ref)
@@ -310,6 +313,15 @@ class LocalizationStack:
         self._last_loc = self._last_odom = None
         self._motion = None  # (odometry chain, matcher pose, wheel odometry) of the last scan
         self._last_precise = self._last_confident = False
+        # the localizer's estimate before the run's first scan (its initial pose), from which
+        # the first scan is masked (mask_offset_beams): the first update is where a piece
+        # moved since the map was made turns the filter
+        self._start = None
+        estimate = getattr(self.localizer, "estimate", None)
+        if self.fusion.mask_offset_beams and callable(estimate):
+            pose0, cov0 = estimate()
+            if is_confident(SimpleNamespace(cov=cov0), self.fusion):
+                self._start = np.asarray(pose0, dtype=float)
         self._settle_left_m = 0.0
         self._gatmo_last = None
         self._injected_seen = _injected(self.localizer)
@@ -503,10 +515,16 @@ class LocalizationStack:
         """The scan with the returns GATMO cannot explain set to NaN (``mask_unexplained``),
         placed from the last localizer pose moved by odometry."""
         unexplained_at = getattr(self.mapper, "unexplained_at", None)
-        if unexplained_at is None or not self.fusion.mask_unexplained or self._last_loc is None:
+        if unexplained_at is None or not self.fusion.mask_unexplained:
             return scan
-        odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
-        pred = compose(self._last_loc, relative(self._last_odom, odom))
+        if self._last_loc is not None:
+            odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
+            pred = compose(self._last_loc, relative(self._last_odom, odom))
+            confident = self._last_confident
+        elif self._start is not None:  # the run's first scan, from the initial pose
+            pred, confident = self._start, True
+        else:
+            return scan
         lp = compose(pred, scan.laser_pose_xytheta)
         valid = scan.valid
         if not valid.any():
@@ -519,7 +537,7 @@ class LocalizationStack:
             bad |= self.mapper.doubted_at(pts)
         if self.fusion.mask_offset_objects and self._last_precise:
             bad |= self.mapper.offset_at(pts)
-        if self.fusion.mask_offset_beams and self._last_confident:
+        if self.fusion.mask_offset_beams and confident:
             bad |= self.mapper.beams_off_at(lp, scan)
         self.n_masked += int(bad.sum())
         if not bad.any():
