@@ -296,6 +296,21 @@ class RecordingLocalizer(ScriptedLocalizer):
         return super().update(odom, scan)
 
 
+def _what_the_localizer_got(loc, grid, fusion, truth, scans):
+    """Runs the stack (``loc``, no matcher, GATMO on ``grid``) over ``scans`` taken at
+    ``truth``: (the stack, per scan its endpoints (B, 2) placed from the true pose and the
+    ranges the localizer was handed (B,))."""
+    from gatmo.objects import GatmoConfig, GatmoMapper
+
+    stack = LocalizationStack(loc, None, GatmoMapper.from_config(GatmoConfig(), grid), fusion)
+    stack.begin_run(1)
+    for s in scans:
+        stack.step(s)
+    return stack, [(p[:2] + orig.ranges_m[:, None] * np.stack(
+        [np.cos(orig.angles_rad), np.sin(orig.angles_rad)], axis=1), seen.ranges_m)
+        for p, orig, seen in zip(truth, scans, loc.scans, strict=True)]
+
+
 def test_returns_gatmo_cannot_explain_are_withheld_from_the_localizer():
     """A box the map does not have: once GATMO has seen its returns unexplained, the stack
     hands the localizer scans with those returns masked (NaN); the walls' returns stay."""
@@ -329,7 +344,6 @@ def test_returns_near_a_doubted_object_are_withheld_with_mask_doubted():
     """A box shifted 0.3 m: once beams pass through its old place GATMO doubts it, and with
     ``mask_doubted`` the returns landing near its old place (its shifted front) are withheld
     from the localizer; the walls' returns never are."""
-    from gatmo.objects import GatmoConfig, GatmoMapper
 
     grid = room_grid(10, 6, 0.05, boxes=[(5, 2.6, 5.15, 2.8)])
     world = room_grid(10, 6, 0.05, boxes=[(5, 2.9, 5.15, 3.1)])
@@ -338,18 +352,12 @@ def test_returns_near_a_doubted_object_are_withheld_with_mask_doubted():
                        stamp_s=0.1 * i) for i, p in enumerate(truth)]
     masked = {}
     for flag in (False, True):
-        loc = RecordingLocalizer(truth)
-        stack = LocalizationStack(loc, None, GatmoMapper.from_config(GatmoConfig(), grid),
-                                  FusionConfig(align_to_map=False, mask_doubted=flag,
-                                               mask_offset_objects=False))
-        stack.begin_run(1)
-        for s in scans:
-            stack.step(s)
-        for p, orig, seen in zip(truth, scans, loc.scans, strict=True):
-            ends = p[:2] + orig.ranges_m[:, None] * np.stack(
-                [np.cos(orig.angles_rad), np.sin(orig.angles_rad)], axis=1)
+        fusion = FusionConfig(align_to_map=False, mask_doubted=flag, mask_offset_objects=False)
+        stack, got = _what_the_localizer_got(RecordingLocalizer(truth), grid, fusion, truth,
+                                             scans)
+        for ends, seen in got:
             near_box = np.hypot(ends[:, 0] - 5.075, ends[:, 1] - 2.85) < 0.45
-            assert not np.isnan(seen.ranges_m[~near_box]).any()  # walls: never withheld
+            assert not np.isnan(seen[~near_box]).any()  # walls: never withheld
         masked[flag] = stack.n_masked
     # the box is relocated within a few scans, ending the doubt: a handful of returns more
     assert masked[True] > masked[False]
@@ -454,7 +462,6 @@ def test_returns_of_a_box_shifted_a_decimetre_are_withheld_with_mask_offset_obje
     shift; with ``mask_offset_objects`` and a filter strictly confident (0.05 m std) the
     localizer gets them all as NaN from the second scan on; with a broad cloud (0.6 m) none,
     and the walls' returns never."""
-    from gatmo.objects import GatmoConfig, GatmoMapper
 
     grid = room_grid(10, 6, 0.05, boxes=[(5.0, 2.4, 5.6, 3.2)])
     world = room_grid(10, 6, 0.05, boxes=[(4.9, 2.4, 5.5, 3.2)])
@@ -465,18 +472,13 @@ def test_returns_of_a_box_shifted_a_decimetre_are_withheld_with_mask_offset_obje
         loc = RecordingLocalizer(truth)
         if not confident:
             loc.confident_at = set()
-        stack = LocalizationStack(loc, None, GatmoMapper.from_config(GatmoConfig(), grid),
-                                  FusionConfig(align_to_map=False, mask_offset_objects=flag))
-        stack.begin_run(1)
-        for s in scans:
-            stack.step(s)
-        for k, (p, orig, seen) in enumerate(zip(truth, scans, loc.scans, strict=True)):
-            ends = p[:2] + orig.ranges_m[:, None] * np.stack(
-                [np.cos(orig.angles_rad), np.sin(orig.angles_rad)], axis=1)
+        _, got = _what_the_localizer_got(
+            loc, grid, FusionConfig(align_to_map=False, mask_offset_objects=flag), truth, scans)
+        for k, (ends, seen) in enumerate(got):
             on_box = (np.abs(ends[:, 0] - 5.2) < 0.35) & (np.abs(ends[:, 1] - 2.8) < 0.45)
             assert on_box.sum() >= 8
-            assert not np.isnan(seen.ranges_m[~on_box]).any()  # walls: never withheld
-            withheld = np.isnan(seen.ranges_m[on_box]).mean()
+            assert not np.isnan(seen[~on_box]).any()  # walls: never withheld
+            withheld = np.isnan(seen[on_box]).mean()
             if flag and confident and k > 0:
                 assert withheld == 1.0, k
             else:  # only the few that mask_unexplained withholds (beyond delta_W)
@@ -507,7 +509,6 @@ def test_returns_of_a_piece_turned_within_its_outline_are_withheld_with_mask_off
     ``mask_offset_beams_reset_test_m`` of travel (with 0, only on the first scan: afterwards
     the strict test gates it); with a broad cloud (0.6 m) or without the flag only the few
     ``mask_unexplained`` withholds; the walls' returns never."""
-    from gatmo.objects import GatmoConfig, GatmoMapper
     from tests.helpers import with_rotated_box
 
     empty = room_grid(8, 6, 0.05)
@@ -518,20 +519,15 @@ def test_returns_of_a_piece_turned_within_its_outline_are_withheld_with_mask_off
                        odom_pose_xytheta=p, stamp_s=0.1 * i) for i, p in enumerate(truth)]
     for flag, std_m, reset_m in ((False, 0.12, 3.0), (True, 0.12, 3.0), (True, 0.6, 3.0),
                                  (True, 0.12, 0.0)):
-        loc = CloudLocalizer(truth, std_m)
-        stack = LocalizationStack(loc, None, GatmoMapper.from_config(GatmoConfig(), grid),
-                                  FusionConfig(align_to_map=False, mask_offset_beams=flag,
-                                               mask_offset_beams_reset_test_m=reset_m))
-        stack.begin_run(1)
-        for s in scans:
-            stack.step(s)
-        for k, (p, orig, seen) in enumerate(zip(truth, scans, loc.scans, strict=True)):
-            ends = p[:2] + orig.ranges_m[:, None] * np.stack(
-                [np.cos(orig.angles_rad), np.sin(orig.angles_rad)], axis=1)
+        fusion = FusionConfig(align_to_map=False, mask_offset_beams=flag,
+                              mask_offset_beams_reset_test_m=reset_m)
+        _, got = _what_the_localizer_got(CloudLocalizer(truth, std_m), grid, fusion, truth,
+                                         scans)
+        for k, (ends, seen) in enumerate(got):
             on_sofa = np.hypot(ends[:, 0] - 4.5, ends[:, 1] - 3.15) < 1.0
             assert on_sofa.sum() >= 10
-            assert not np.isnan(seen.ranges_m[~on_sofa]).any()  # walls: never withheld
-            withheld = np.isnan(seen.ranges_m[on_sofa]).mean()
+            assert not np.isnan(seen[~on_sofa]).any()  # walls: never withheld
+            withheld = np.isnan(seen[on_sofa]).mean()
             # the reset test gates the mask for reset_m of travel (the robot drives 0.4 m
             # here), the strict one afterwards; the first scan goes by the initial cloud
             if flag and std_m < 0.15 and (reset_m > 0.4 or k == 0):
