@@ -162,7 +162,7 @@ class FusionConfig(GatmoModel):
     mask_doubted: bool = False
     mask_offset_objects: bool = True
     mask_offset_beams: bool = False
-    mask_offset_beams_reset_test_m: float = Field(0.0, ge=0)
+    mask_offset_beams_reset_test_m: float = Field(3.0, ge=0)
     gatmo_pose_gain: float = Field(1.0, gt=0, le=1)
     motion_from_matcher: bool = False
     matcher_motion_max_gap_m: float = Field(0.2, gt=0)
