@@ -424,14 +424,10 @@ class GatmoMapper:
         relocated, keeping its id, if the match passes the chair tests (score, free space,
         enough of it seen, the beams of those scans) and beats its current pose."""
         c = self.cfg
-        g = self._grid
-        cells = g.world_to_cell(pts)
-        ok = g.in_bounds(cells) & (np.hypot(*(pts - lp[:2]).T) <= c.absence_max_range_m)
-        if ok.sum() < 4 * c.offset_min_returns:
+        near = self._returns_near_map(pts, lp)
+        if near is None:
             return
-        cells = cells[ok]
-        dist = self._near_dist[cells[:, 1], cells[:, 0]]
-        owner = self._near_owner[cells[:, 1], cells[:, 0]]
+        _, cells, dist, owner = near
         odd = self._objects_off(dist, owner, self._beams[0], scan, self._expected)
         if not odd:
             return
@@ -454,6 +450,35 @@ class GatmoMapper:
                 # _relocate clears the object's evidence, the nudge's included
                 self._relocate(o, mt, stamp_s, events, support_scans=self._nudge_scans[o.id])
                 self.counts["nudged"] += 1
+
+    def _returns_near_map(self, pts: np.ndarray, lp: np.ndarray):
+        """Of the returns ``pts`` (N, 2) seen from the laser at ``lp``, those on the map and
+        within ``absence_max_range_m``: (their indices (K,), cells (K, 2), distance to the
+        nearest map cell (K,), its owner (K,)); None when fewer than 4 ``offset_min_returns``
+        are."""
+        g = self._grid
+        cells = g.world_to_cell(pts)
+        ok = g.in_bounds(cells) & (np.hypot(*(pts - lp[:2]).T) <= self.cfg.absence_max_range_m)
+        if ok.sum() < 4 * self.cfg.offset_min_returns:
+            return None
+        cells = cells[ok]
+        return (np.nonzero(ok)[0], cells, self._near_dist[cells[:, 1], cells[:, 0]],
+                self._near_owner[cells[:, 1], cells[:, 0]])
+
+    def _expected_ends(self, lp: np.ndarray, scan: Scan, use: np.ndarray):
+        """Where the current map expects each beam of ``scan`` from the laser at ``lp`` to end:
+        (range (B,) [m], beam directions (B, 2), the end point half a cell into the cell hit
+        (B, 2), owner of that cell (B,): object index, STRUCTURE, or -1 for beams not in
+        ``use`` (B,) bool, expected to reach max range, or ending off the map)."""
+        g = self._grid
+        expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
+        u = np.stack([np.cos(lp[2] + scan.angles_rad), np.sin(lp[2] + scan.angles_rad)], axis=1)
+        ends = lp[:2] + (expected[:, None] + g.resolution_m / 2) * u
+        cells = g.world_to_cell(ends)
+        ok = use & (expected < scan.range_max_m) & g.in_bounds(cells)
+        own = np.full(len(expected), -1)
+        own[ok] = self._owner[cells[ok, 1], cells[ok, 0]]
+        return expected, u, ends, own
 
     def _objects_off(self, dist: np.ndarray, owner: np.ndarray, beam_owner: np.ndarray,
                      scan: Scan, expected: np.ndarray) -> list[tuple[MapObject, np.ndarray]]:
@@ -501,30 +526,18 @@ class GatmoMapper:
         returns to the map (:meth:`offset_at`) stays near zero while the rest pulls the
         particles towards its old place; its beams ending before or beyond it show it (a beam
         with no return went on beyond it)."""
-        c = self.cfg
-        g = self._grid
         lp = np.asarray(laser_pose_xytheta, dtype=float)
         valid = scan.valid
         out = np.zeros(int(valid.sum()), dtype=bool)
         a = lp[2] + scan.angles_rad[valid]
-        r = scan.ranges_m[valid]
-        pts = lp[:2] + r[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
-        cells = g.world_to_cell(pts)
-        ok = g.in_bounds(cells) & (r <= c.absence_max_range_m)
-        if ok.sum() < 4 * c.offset_min_returns:
+        pts = lp[:2] + scan.ranges_m[valid, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
+        near = self._returns_near_map(pts, lp)
+        if near is None:
             return out
-        idx = np.nonzero(ok)[0]
-        cells = cells[ok]
-        dist = self._near_dist[cells[:, 1], cells[:, 0]]
-        owner = self._near_owner[cells[:, 1], cells[:, 0]]
-        expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
-        u = np.stack([np.cos(lp[2] + scan.angles_rad), np.sin(lp[2] + scan.angles_rad)], axis=1)
-        ends = g.world_to_cell(lp[:2] + (expected[:, None] + g.resolution_m / 2) * u)
+        idx, _, dist, owner = near
         with np.errstate(invalid="ignore"):  # a no-return beam went on beyond (NaN: nothing)
             informative = valid | (scan.ranges_m >= scan.range_max_m)
-        hit = informative & (expected < scan.range_max_m) & g.in_bounds(ends)
-        beam_owner = np.full(len(expected), -1)
-        beam_owner[hit] = self._owner[ends[hit, 1], ends[hit, 0]]
+        expected, _, _, beam_owner = self._expected_ends(lp, scan, informative)
         for _, mine in self._objects_off(dist, owner, beam_owner, scan, expected):
             out[idx[mine]] = True
         return out
@@ -688,18 +701,14 @@ class GatmoMapper:
         predicts against the measured ones; beams ending short of it (occluded) are neither."""
         c = self.cfg
         g = self._grid
-        self._expected = expected = cast_rays(g, lp, scan.angles_rad, scan.range_max_m)
         r = scan.ranges_m
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(r) & (r >= scan.range_min_m)
         r = np.where(valid, np.minimum(r, scan.range_max_m), 0.0)
-        hit = valid & (expected < scan.range_max_m)
-        u = np.stack([np.cos(lp[2] + scan.angles_rad), np.sin(lp[2] + scan.angles_rad)], axis=1)
-        ends = lp[:2] + (expected[:, None] + g.resolution_m / 2) * u
+        expected, u, ends, own = self._expected_ends(lp, scan, valid)
+        self._expected = expected
         cells = g.world_to_cell(ends)
-        ok = hit & g.in_bounds(cells)
-        own = np.full(len(r), -1)
-        own[ok] = self._owner[cells[ok, 1], cells[ok, 0]]
+        ok = valid & (expected < scan.range_max_m) & g.in_bounds(cells)
         # a beam passes through an object only if the map has the object a cell deeper along
         # it too: one that clips an edge cell (which holds the surface and some free space
         # beside it, as in any map built from scans) passes the object, not through it
