@@ -113,6 +113,16 @@ class GatmoConfig(GatmoModel):
     match_max_through_fraction: float = Field(
         0.1, ge=0, le=1, description="of the beams on the placed object or through it, through")
     match_min_edge_fraction: float = Field(0.3, ge=0, le=1)
+    match_ambiguity_wait: bool = Field(
+        False, description="beyond the paper: a chair that fits a different-looking shape of "
+        "the map (any object, candidate or not) nearly as well as its best match waits for "
+        "more scans (up to match_ambiguity_patience_scans): a corner seen of a lounge chair "
+        "fits a cabinet's corner")
+    match_ambiguity_margin: float = Field(
+        0.05, ge=0, le=1, description="a rival shape scoring within this of the best match "
+        "makes the chair ambiguous")
+    match_ambiguity_patience_scans: int = Field(
+        30, ge=1, description="after this many scans of the chair, match despite ambiguity")
     match_free_first: bool = Field(
         True, description="beyond the paper: of the alignments a partial view allows, the best "
         "that covers no space seen free (else the best, then refused)")
