@@ -123,6 +123,13 @@ class GatmoConfig(GatmoModel):
         "makes the chair ambiguous")
     match_ambiguity_patience_scans: int = Field(
         30, ge=1, description="after this many scans of the chair, match despite ambiguity")
+    match_ambiguity_rivals: Literal["unseen", "movable"] = Field(
+        "unseen", description="which objects may make a chair ambiguous: any furniture not "
+        "seen at its place this run, or only those with evidence that they move (absent, in "
+        "doubt, or movable: moved before or look like one that did)")
+    match_ambiguity_settle: bool = Field(
+        False, description="a chair whose match waited on ambiguity and that leaves (not seen "
+        "for tau_memory, or the run ends) takes its best match then, as without the wait")
     match_free_first: bool = Field(
         True, description="beyond the paper: of the alignments a partial view allows, the best "
         "that covers no space seen free (else the best, then refused)")

@@ -243,7 +243,8 @@ class GatmoMapper:
         """Dominant chairs seen this run and never matched become new objects (in M)."""
         events: list[Event] = []
         for m in self._meta:
-            if m.dominant() == "chair" and m.matched_object is None:
+            if m.dominant() == "chair" and m.matched_object is None and not self._settle(
+                    m, m.last_seen, events):
                 self._to_gamma(m, m.last_seen, events)
         self._meta = []
         taken = self._grid.occupied.copy()  # the map, and what is added below
@@ -984,7 +985,10 @@ class GatmoMapper:
             tier = 0
         return _rank_key(o, mt, tier, earlier), mt
 
-    def _try_match(self, m: Metaobject, stamp_s, events) -> bool:
+    def _try_match(self, m: Metaobject, stamp_s, events, settle: bool = False) -> bool:
+        """Match the chair of track ``m`` to the best candidate (:meth:`_candidates`) that
+        passes every test, and relocate it. ``settle``: the track is leaving, so a match held
+        back as ambiguous is made now (``match_ambiguity_settle``)."""
         if m.n_verified < self.cfg.match_min_verified_scans:
             return False
         view = self._chair_view(m)
@@ -1003,9 +1007,10 @@ class GatmoMapper:
         if best is None:
             return False
         _, o, mt = best
-        if (self.cfg.match_ambiguity_wait
+        if (self.cfg.match_ambiguity_wait and not settle
                 and m.n_obs < self.cfg.match_ambiguity_patience_scans
                 and self._ambiguous(m, o, mt, view)):
+            m.waited = True
             return False
         patient = m.n_obs < self.cfg.match_patience_scans
         if patient:
@@ -1018,6 +1023,13 @@ class GatmoMapper:
         m.matched_object = o.id
         return True
 
+    def _settle(self, m: Metaobject, stamp_s, events) -> bool:
+        """A leaving track whose match waited on ambiguity takes its best match now, with
+        ``match_ambiguity_settle``; True if it relocated an object."""
+        if not (self.cfg.match_ambiguity_settle and m.waited):
+            return False
+        return self._try_match(m, stamp_s, events, settle=True)
+
     def _confirmed(self, o: MapObject) -> bool:
         """``o`` was seen standing at its place this run (and is not in doubt)."""
         return self._hits.get(o.id, 0) >= self.cfg.confirm_min_beams and o.id not in self._doubt
@@ -1028,12 +1040,15 @@ class GatmoMapper:
         object that does not look like ``o`` and could be it (furniture not seen at its place
         this run, candidate or not) nearly as well: within ``match_ambiguity_margin``, not
         larger than it, free space and beams consistent there. What is seen of it does not
-        yet tell the two apart (a corner of a lounge chair is a corner of a cabinet)."""
+        yet tell the two apart (a corner of a lounge chair is a corner of a cabinet). With
+        ``match_ambiguity_rivals: movable`` only objects known to move count as rivals."""
         pts, _, diam_p = view
         shapes: list[MapObject] = [o]
         for r in self.object_map.objects:
+            movable = r.status in ("M", "A") or r.id in self._doubt
             if (r.structure or r.status not in ("U", "M", "A") or not self._distinctive(r)
                     or self._confirmed(r)
+                    or (self.cfg.match_ambiguity_rivals == "movable" and not movable)
                     or any(lookalike(r, q, self.cfg.lookalike_tolerance) for q in shapes)):
                 continue
             shapes.append(r)
@@ -1205,7 +1220,8 @@ class GatmoMapper:
             dom = m.dominant()
             if dom == "person":
                 self.counts["persons"] += 1
-            elif dom == "chair" and m.matched_object is None:
+            elif dom == "chair" and m.matched_object is None and not self._settle(
+                    m, stamp_s, events):
                 self._to_gamma(m, stamp_s, events)
         self._meta = keep
 

@@ -40,6 +40,7 @@ class Metaobject:
         self.ll_chair = 0.0
         self.centres: list[np.ndarray] = []
         self.matched_object: int | None = None
+        self.waited = False  # a match was held back as ambiguous (GatmoMapper._ambiguous)
         # the scans that saw it (set by the mapper): laser pose, angles, ranges, reach
         self.views: list[tuple] = []
         self._add(points, stamp_s, verified)
