@@ -138,20 +138,24 @@ def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, re
     assert (("relocated", box.id) in kinds) == relocated
 
 
-@pytest.mark.parametrize(("wait", "settle", "n_desk", "relocated"), [
-    (False, False, 60, True), (True, False, 60, False), (True, True, 60, False),
-    (False, False, 40, True), (True, False, 40, False), (True, True, 40, True)])
-def test_a_chair_that_fits_an_unseen_piece_of_another_shape_waits(wait, settle, n_desk,
+@pytest.mark.parametrize(("wait", "settle", "rivals", "n_desk", "relocated"), [
+    (False, False, "unseen", 60, True), (True, False, "unseen", 60, False),
+    (True, True, "unseen", 60, False), (False, False, "unseen", 40, True),
+    (True, False, "unseen", 40, False), (True, True, "unseen", 40, True),
+    (True, False, "movable", 60, True)])
+def test_a_chair_that_fits_an_unseen_piece_of_another_shape_waits(wait, settle, rivals, n_desk,
                                                                   relocated):
     # as above, tracked up to the range limit (the ring test cannot refuse), but the desk is in
     # the map too, at a place out of the robot's sight: what is seen of it fits the desk as
     # well as the absent box, so with the ambiguity wait the box is not relocated onto it.
     # Driving on (60 scans of the desk) shows more of the desk than the box could be, and
     # nothing is relocated even with match_ambiguity_settle; stopping after 40, it is still
-    # ambiguous when the run ends, and settling takes the match then (as without the wait)
+    # ambiguous when the run ends, and settling takes the match then (as without the wait).
+    # A desk that never moved is no rival with match_ambiguity_rivals: movable
     cfg = CFG.model_copy(update={"track_range_margin_m": 0.0, "match_ambiguity_wait": wait,
                                  "match_ambiguity_patience_scans": 100,
-                                 "match_ambiguity_settle": settle})
+                                 "match_ambiguity_settle": settle,
+                                 "match_ambiguity_rivals": rivals})
     g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
     world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
     m = GatmoMapper.from_config(cfg, g)
@@ -163,7 +167,7 @@ def test_a_chair_that_fits_an_unseen_piece_of_another_shape_waits(wait, settle, 
     assert kinds[0] == ("absent", box.id)
     kinds += [(e.kind, e.object_id) for e in m.end_run()]
     assert (("relocated", box.id) in kinds) == relocated, kinds
-    assert (m.counts["ambiguous"] > 0) == wait
+    assert (m.counts["ambiguous"] > 0) == (wait and rivals == "unseen")
 
 
 @pytest.mark.parametrize("verified, added", [(False, False), (True, True)])
