@@ -187,6 +187,19 @@ class GatmoConfig(GatmoModel):
     offset_min_fit_fraction: float = Field(
         0.6, ge=0, le=1, description="GatmoMapper.offset_at: of the scan's other returns near "
         "the map, the fraction that must fit it (else the pose, not an object, is off)")
+    provisional_landmarks: bool = Field(
+        False, description="beyond the paper: while a run lasts, still chairs not (yet) "
+        "matched to a map object (dominant chair tracks with provisional_min_verified_scans "
+        "from confirmed poses, and this run's Gamma objects) go into the localizer's map as "
+        "anonymous outlines (cells hit in 2 confirmed scans), and returns near them are no "
+        "longer withheld as unexplained; GATMO's own map and the saved map do not change. A "
+        "chair whose match waits (match_ambiguity_wait) or that joins Gamma still holds the "
+        "filter where a wrong identity would have put the right outline")
+    provisional_min_verified_scans: int = Field(
+        9, ge=1, description="scans of a track from confirmed poses before its outline is a "
+        "provisional landmark")
+    provisional_every_scans: int = Field(
+        5, ge=1, description="GATMO updates between refreshes of the provisional landmarks")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
     add_max_passed_fraction: float = Field(

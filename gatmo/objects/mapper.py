@@ -30,7 +30,7 @@ from scipy import ndimage
 
 from gatmo.datasets.types import Scan
 from gatmo.geometry import compose, inverse, transform_points
-from gatmo.maps.grid import FREE, OccupancyGrid
+from gatmo.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
 from gatmo.objects.matching import EdgeField, beam_consistency, lookalike, match_points
@@ -128,6 +128,12 @@ class GatmoMapper:
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
         self._view: tuple | None = None  # the scan being tracked (Metaobject.views)
+        # what the localizer was last given: the reconfigured map plus, with
+        # provisional_landmarks, the outlines of still chairs not matched yet
+        self._loc_cells = self._grid.cells.copy()
+        self._prov_near: np.ndarray | None = None  # cells within delta_W of such outlines
+        self._run_open = False  # between begin_run and end_run
+        self._prov_tick = 0  # scans GATMO took, for provisional_every_scans
         self._reset_run_evidence()
         self._build_owner()
 
@@ -216,17 +222,52 @@ class GatmoMapper:
             self._near_owner = np.full(g.cells.shape, -1, dtype=np.int32)
 
     def _rerender(self) -> None:
-        new = self.object_map.render(self.base)
-        diff = new.cells != self._grid.cells
+        self._grid = self.object_map.render(self.base)
+        self._build_owner()
+        self._sync_localizer()
+
+    def _sync_localizer(self) -> None:
+        """Queue region updates that bring the localizer's map to the reconfigured map plus
+        the provisional landmarks (``provisional_landmarks``)."""
+        target = self._grid.cells
+        prov = self._provisional_mask()
+        if prov is not None:
+            target = target.copy()
+            target[prov & (target == FREE)] = OCCUPIED
+        diff = target != self._loc_cells
         if diff.any():
             lab, _ = ndimage.label(ndimage.binary_dilation(diff, iterations=2))
             for sl in ndimage.find_objects(lab):
                 if sl is None:
                     continue
-                cells = new.cells[sl].copy()
+                cells = target[sl].copy()
                 self._pending.append((cells, sl[1].start, sl[0].start))
-        self._grid = new
-        self._build_owner()
+        self._loc_cells = target.copy()
+
+    def _provisional_mask(self) -> np.ndarray | None:
+        """Cells of the provisional landmarks (bool, the grid's shape), or None (none, or the
+        option is off); also sets ``_prov_near`` for :meth:`unexplained_at`."""
+        self._prov_near = None
+        c = self.cfg
+        if not c.provisional_landmarks or not self._run_open:
+            return None
+        parts = [m.chair_points(verified=True) for m in self._meta
+                 if m.matched_object is None and m.n_verified >= c.provisional_min_verified_scans
+                 and m.dominant() == "chair"]
+        parts = [p for p in parts if len(p) >= c.chair_min_cells]
+        parts += [o.cells_world() for o in self.object_map.Gamma
+                  if o.id in self._gamma_this_run]
+        if not parts:
+            return None
+        g = self._grid
+        cells = g.world_to_cell(np.vstack(parts))
+        cells = cells[g.in_bounds(cells)]
+        mask = np.zeros(g.cells.shape, dtype=bool)
+        mask[cells[:, 1], cells[:, 0]] = True
+        r = int(np.ceil(c.delta_W_m / g.resolution_m))
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        self._prov_near = ndimage.binary_dilation(mask, structure=xx**2 + yy**2 <= r * r)
+        return mask
 
     # ------------------------------------------------------------------ runs
     def begin_run(self, run_id: int) -> None:
@@ -238,6 +279,7 @@ class GatmoMapper:
         self._unexplained_dilated = None
         self._near_returns[:] = 0
         self._reset_run_evidence()
+        self._run_open = True
 
     def end_run(self) -> list[Event]:
         """Dominant chairs seen this run and never matched become new objects (in M)."""
@@ -247,6 +289,7 @@ class GatmoMapper:
                     m, m.last_seen, events):
                 self._to_gamma(m, m.last_seen, events)
         self._meta = []
+        self._run_open = False  # the provisional landmarks leave the localizer's map
         taken = self._grid.occupied.copy()  # the map, and what is added below
         for o in sorted(self.object_map.Gamma, key=lambda g: -len(g.shape_xy)):
             if len(o.shape_xy) < self.cfg.add_min_cells:
@@ -337,6 +380,10 @@ class GatmoMapper:
             self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
                         verified=bool(pose_verified))
         self._expire(stamp_s, events)
+        if self.cfg.provisional_landmarks:
+            self._prov_tick += 1
+            if self._prov_tick % self.cfg.provisional_every_scans == 0:
+                self._sync_localizer()
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
 
@@ -356,6 +403,8 @@ class GatmoMapper:
         cy, cx = c[ok, 1], c[ok, 0]
         out[ok] = (self._unexplained_dilated[cy, cx] >= min_count) & \
             (self._near_dist[cy, cx] > self.cfg.delta_W_m)
+        if self._prov_near is not None:  # the localizer's map has them (provisional_landmarks)
+            out[ok] &= ~self._prov_near[cy, cx]
         return out
 
     def doubted_at(self, points_xy: np.ndarray) -> np.ndarray:

@@ -995,3 +995,57 @@ def test_one_scan_from_a_pose_off_does_not_bar_a_match_with_views(free_from, rel
         assert np.hypot(*(box.pose_xytheta[:2] - [6.5, 3.0])) < 0.06
     else:
         assert m.refusals.get((box.id, "free_space"), 0) > 0
+
+
+@pytest.mark.parametrize("provisional", [False, True])
+def test_a_still_chair_not_in_the_map_holds_the_localizer_while_the_run_lasts(provisional):
+    """A box the map lacks stands still while two legs walk past, seen from true poses. With
+    ``provisional_landmarks`` the localizer's map (the region updates GATMO queues, applied to
+    the static map) gets the box's outline once its track is a chair, and returns on it are no
+    longer withheld as unexplained; the legs never enter that map; GATMO's own map gets the box
+    only when it is added at the run's end, and then the localizer's map is GATMO's again.
+    Without the option the localizer's map gains nothing before the run's end."""
+    grid = room_grid(10, 6, 0.05)
+    cfg = CFG.model_copy(update={"provisional_landmarks": provisional})
+    m = GatmoMapper.from_config(cfg, grid)
+    m.begin_run(1)
+    loc = grid.cells.copy()
+
+    def apply_changes():
+        for cells, ix0, iy0 in m.pop_map_changes():
+            loc[iy0:iy0 + cells.shape[0], ix0:ix0 + cells.shape[1]] = cells
+
+    box = (6.0, 4.6, 6.5, 5.1)
+    on_box = np.array([[6.0, 4.85], [6.1, 4.6]])  # on the faces the robot sees
+    legs_seen = np.zeros(grid.cells.shape, dtype=bool)
+    masked = []
+    for i in range(100):
+        t = 0.1 * i
+        world = room_grid(10, 6, 0.05, boxes=[box])
+        x = 1.0 + 1.0 * t
+        swing = 0.15 * np.sin(2 * np.pi * t)
+        for lx, ly in ((x + swing, 1.9), (x - swing, 2.15)) if t < 4.0 else ():
+            c0 = world.world_to_cell(np.array([[lx - 0.05, ly - 0.05], [lx + 0.05, ly + 0.05]]))
+            world.cells[c0[0, 1]:c0[1, 1] + 1, c0[0, 0]:c0[1, 0] + 1] = 100
+            legs_seen[c0[0, 1]:c0[1, 1] + 1, c0[0, 0]:c0[1, 0] + 1] = True
+        pose = np.array([1.5 + 0.05 * i, 3.5, -0.3])
+        s = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0, stamp_s=t)
+        m.update(pose, s, pose_confident=True, stamp_s=t)
+        apply_changes()
+        assert not (loc[legs_seen] == 100).any()  # a person never holds the localizer
+        masked.append(m.unexplained_at(on_box).any())
+    cb = grid.world_to_cell(np.array([[box[0] - 0.1, box[1] - 0.1], [box[2] + 0.1, box[3] + 0.1]]))
+    near_box = np.zeros(grid.cells.shape, dtype=bool)
+    near_box[cb[0, 1]:cb[1, 1] + 1, cb[0, 0]:cb[1, 0] + 1] = True
+    assert not m.grid().occupied[near_box].any()  # GATMO's own map: not yet
+    assert masked[6]  # early on the box's returns are unexplained, and withheld
+    if provisional:
+        assert (loc[near_box] == 100).sum() >= 10 and not (loc[~near_box] != grid.cells[~near_box]
+                                                            ).any()
+        assert not masked[-1]
+    else:
+        assert (loc == grid.cells).all() and masked[-1]
+    m.end_run()
+    apply_changes()
+    assert m.grid().occupied[near_box].sum() >= 10  # added at the run's end
+    np.testing.assert_array_equal(loc, m.grid().cells)
