@@ -41,20 +41,10 @@ DEFAULT_B = ("gatmo.match_ambiguity_wait=true", "gatmo.match_ambiguity_settle=tr
 
 def _one_run(cfg, base, objects_path, scans, log, gt, k, scenario, ties) -> dict:
     from gatmo.pipeline.evaluate import score_run
-    from gatmo.pipeline.runs import (
-        _make_mapper,
-        make_localizer,
-        make_matcher,
-        run_side,
-        score,
-    )
-    from gatmo.pipeline.stack import LocalizationStack
+    from gatmo.pipeline.runs import _make_mapper, make_full_stack, run_side, score
 
     mapper = _make_mapper(cfg, base, objects_path)
-    pose0 = scans[0].gt_pose_xytheta
-    stack = LocalizationStack(make_localizer(cfg, mapper.grid(), cfg.seed + k, pose0, False),
-                              make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
-                              mapper, cfg.fusion)
+    stack = make_full_stack(cfg, mapper, cfg.seed + k, scans[0].gt_pose_xytheta)
     tr = run_side(stack, scans, log=str(log), side="gatmo", run_id=k + 1)
     row = score(tr, gt)
     o = score_run(mapper.object_map, ties, scenario, k + 1, tr.events)
@@ -94,22 +84,23 @@ def one_seed(seed: int, runs: int, tmp: Path, set_a: list[str], set_b: list[str]
 
 def summarize(rows: list[dict], draws: int = 2000) -> dict:
     """Per figure: mean of A and B over the pairs, B - A with a 95 % bootstrap interval (the
-    seeds resampled, their runs together), pairs B higher / lower."""
-    rng = np.random.default_rng(0)
-    seeds = sorted({r["seed"] for r in rows})
+    seeds resampled, their runs together: ``benchmarks.paired`` on each seed's mean over its
+    runs), pairs B higher / lower."""
+    from benchmarks.paired import paired
+
+    per_seed: dict[str, dict[int, dict]] = {"a": {}, "b": {}}
+    for side, by_seed in per_seed.items():
+        for seed in {r["seed"] for r in rows}:
+            mine = [r[side] for r in rows if r["seed"] == seed]
+            by_seed[seed] = {f: float(np.mean([x[f] for x in mine])) for f in FIGURES}
+    res = paired(per_seed["a"], per_seed["b"], [(f, f, None) for f in FIGURES], draws=draws)
     out = {}
-    for f in FIGURES:
+    for f, d in zip(FIGURES, res, strict=True):
         a = np.array([r["a"][f] for r in rows], dtype=float)
         b = np.array([r["b"][f] for r in rows], dtype=float)
-        by_seed = [np.array([i for i, r in enumerate(rows) if r["seed"] == s]) for s in seeds]
-        boot = []
-        for _ in range(draws):
-            idx = np.concatenate([by_seed[j] for j in rng.integers(0, len(seeds), len(seeds))])
-            boot.append(np.mean(b[idx] - a[idx]))
-        lo, hi = np.percentile(boot, [2.5, 97.5])
-        out[f] = {"a": float(a.mean()), "b": float(b.mean()), "b_minus_a": float(np.mean(b - a)),
-                  "ci95": [float(lo), float(hi)], "b_higher": int(np.sum(b > a + 1e-9)),
-                  "b_lower": int(np.sum(b < a - 1e-9)), "pairs": len(rows)}
+        out[f] = {"a": d["a"], "b": d["b"], "b_minus_a": d["b_minus_a"], "ci95": d["ci95"],
+                  "b_higher": int(np.sum(b > a + 1e-9)), "b_lower": int(np.sum(b < a - 1e-9)),
+                  "pairs": len(rows)}
     return out
 
 

@@ -229,10 +229,9 @@ class GatmoMapper:
     def _sync_localizer(self) -> None:
         """Queue region updates that bring the localizer's map to the reconfigured map plus
         the provisional landmarks (``provisional_landmarks``)."""
-        target = self._grid.cells
+        target = self._grid.cells.copy()
         prov = self._provisional_mask()
         if prov is not None:
-            target = target.copy()
             target[prov & (target == FREE)] = OCCUPIED
         diff = target != self._loc_cells
         if diff.any():
@@ -242,7 +241,7 @@ class GatmoMapper:
                     continue
                 cells = target[sl].copy()
                 self._pending.append((cells, sl[1].start, sl[0].start))
-        self._loc_cells = target.copy()
+        self._loc_cells = target
 
     def _provisional_mask(self) -> np.ndarray | None:
         """Cells of the provisional landmarks (bool, the grid's shape), or None (none, or the

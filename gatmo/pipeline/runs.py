@@ -155,6 +155,17 @@ def make_matcher(cfg):
     return ScanMatchOdometry.from_config(cfg.icp)
 
 
+def make_full_stack(cfg, mapper, seed: int, initial_pose) -> LocalizationStack:
+    """The full stack: the localizer on GATMO's current map (global localization when
+    ``initial_pose`` is None), the scan matcher if ``cfg.fusion.use_scan_matcher``, GATMO."""
+    return LocalizationStack(
+        make_localizer(cfg, mapper.grid(), seed, initial_pose, initial_pose is None),
+        make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
+        mapper,
+        cfg.fusion,
+    )
+
+
 def run_side(
     stack: LocalizationStack,
     scans: list,
@@ -363,12 +374,7 @@ def run_gatmo(
     pose0 = initial_pose_for(scans, initial_pose, global_localization)
     if pose0 is not None:
         check_overlap(base, scans[0], pose0, log)
-    stack = LocalizationStack(
-        make_localizer(cfg, mapper.grid(), cfg.seed, pose0, pose0 is None),
-        make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
-        mapper,
-        cfg.fusion,
-    )
+    stack = make_full_stack(cfg, mapper, cfg.seed, pose0)
     trace = run_side(
         stack, scans, log=str(log), side="gatmo", run_id=run_id, progress=progress,
         total=len(scans),
@@ -494,12 +500,7 @@ def compare(
         static = LocalizationStack(make_localizer(cfg, base, seed, pose0, pose0 is None))
         t_static = run_side(static, scans, log=str(log), side="static", run_id=k + 1,
                             progress=_offset(progress, done), total=None, observer=observer)
-        gat = LocalizationStack(
-            make_localizer(cfg, grid_before, seed, pose0, pose0 is None),
-            make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
-            mapper,
-            cfg.fusion,
-        )
+        gat = make_full_stack(cfg, mapper, seed, pose0)  # its localizer on grid_before
         t_gatmo = run_side(gat, scans, log=str(log), side="gatmo", run_id=k + 1,
                            progress=_offset(progress, done + len(scans)), total=None,
                            observer=observer)
