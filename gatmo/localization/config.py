@@ -72,23 +72,6 @@ class AmclConfig(GatmoModel):
     sigma_hit_m: float = Field(0.2, gt=0)
     lambda_short: float = Field(0.1, gt=0)
     laser_likelihood_max_dist_m: float = Field(2.0, gt=0)
-    soft_sigma_factor: float = Field(
-        1.0, ge=1.0,
-        description=(
-            "likelihood-field models (not an AMCL parameter): sigma_hit around the map cells "
-            "marked soft (furniture that may have moved: gatmo.localizer_soft_objects) is this "
-            "many times sigma_hit; 1: as around any cell"
-        ),
-    )
-    soft_hit_weight: float = Field(
-        1.0, gt=0.0, le=1.0,
-        description=(
-            "likelihood-field models (not an AMCL parameter): the hit term of a return on a map "
-            "cell marked soft (gatmo.localizer_soft_objects) is this fraction of z_hit, so "
-            "furniture that may have moved weighs less than walls without being blurred; 1: "
-            "as any cell"
-        ),
-    )
     laser_min_range_m: float | None = Field(
         None, description="None: use the scan's own range_min (AMCL's -1.0)"
     )

@@ -93,12 +93,7 @@ class MonteCarloLocalizer:
                  rng: np.random.Generator | None = None) -> None:
         self.cfg = cfg
         self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
-        # a lower hit term is a longer distance: w exp(-d^2 / 2s^2) = exp(-(d^2 + c^2) / 2s^2)
-        # with c = s sqrt(2 ln(1 / w)) (likelihood.soft_distance_field)
-        soft_offset_m = cfg.sigma_hit_m * math.sqrt(2.0 * math.log(1.0 / cfg.soft_hit_weight))
-        self.field = LikelihoodField(grid.copy(), cfg.laser_likelihood_max_dist_m,
-                                     soft_factor=cfg.soft_sigma_factor,
-                                     soft_offset_m=soft_offset_m)
+        self.field = LikelihoodField(grid.copy(), cfg.laser_likelihood_max_dist_m)
         self.sensor = SensorModel(self.field, cfg, ray_caster=cfg.beam_ray_caster)
         self._free_xy: np.ndarray | None = None
         self.particles = np.zeros((0, 3))
@@ -186,13 +181,9 @@ class MonteCarloLocalizer:
         self.field.set_grid(grid.copy())
         self._free_xy = None
 
-    def update_map_region(self, cells_new: np.ndarray, ix0: int, iy0: int,
-                          soft_new: np.ndarray | None = None) -> None:
-        """Cells of the map changed (furniture moved): recompute that region of the field.
-        ``soft_new`` (h, w) bool, if given: which of the region's cells are soft (furniture
-        that may move, ``soft_sigma_factor``)."""
-        self.field.update_region(np.asarray(cells_new, dtype=np.int8), int(ix0), int(iy0),
-                                 soft_new)
+    def update_map_region(self, cells_new: np.ndarray, ix0: int, iy0: int) -> None:
+        """Cells of the map changed (furniture moved): recompute that region of the field."""
+        self.field.update_region(np.asarray(cells_new, dtype=np.int8), int(ix0), int(iy0))
         self._free_xy = None
         self.stats.map_region_updates += 1
 

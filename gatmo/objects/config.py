@@ -200,12 +200,6 @@ class GatmoConfig(GatmoModel):
         "provisional landmark")
     provisional_every_scans: int = Field(
         5, ge=1, description="GATMO updates between refreshes of the provisional landmarks")
-    localizer_soft_objects: Literal["none", "movable", "furniture"] = Field(
-        "none", description="beyond the paper: which placed objects the localizer's likelihood "
-        "field treats as soft (its gaussian amcl.soft_sigma_factor times wider around their "
-        "cells, so a piece shifted by a few cm pulls the particles less than a wall): "
-        "'movable' objects known to move (in M, or moved before), and the provisional "
-        "landmarks; 'furniture' every object that is not structure; 'none' no object")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
     add_max_passed_fraction: float = Field(

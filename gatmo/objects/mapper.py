@@ -107,7 +107,7 @@ class GatmoMapper:
         self.run = 0
         self._last_stamp = 0.0
         self._grid = object_map.render(self.base)
-        self._pending: list[tuple[np.ndarray, int, int, np.ndarray]] = []
+        self._pending: list[tuple[np.ndarray, int, int]] = []
         self._meta: list[Metaobject] = []
         self._next_meta = 1
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
@@ -131,7 +131,6 @@ class GatmoMapper:
         # what the localizer was last given: the reconfigured map plus, with
         # provisional_landmarks, the outlines of still chairs not matched yet
         self._loc_cells = self._grid.cells.copy()
-        self._loc_soft = np.zeros(self._grid.cells.shape, dtype=bool)
         self._prov_near: np.ndarray | None = None  # cells within delta_W of such outlines
         self._run_open = False  # between begin_run and end_run
         self._prov_tick = 0  # scans GATMO took, for provisional_every_scans
@@ -171,10 +170,8 @@ class GatmoMapper:
         """The reconfigured map (a copy)."""
         return self._grid.copy()
 
-    def pop_map_changes(self) -> list[tuple[np.ndarray, int, int, np.ndarray]]:
-        """Region updates for the localizer since the last call: (cells_new (h, w) int8,
-        ix0, iy0, soft_new (h, w) bool: the cells of objects the localizer should treat as
-        soft, ``localizer_soft_objects``)."""
+    def pop_map_changes(self) -> list[tuple[np.ndarray, int, int]]:
+        """Region updates (cells_new (h, w), ix0, iy0) since the last call."""
         out, self._pending = self._pending, []
         return out
 
@@ -236,32 +233,15 @@ class GatmoMapper:
         prov = self._provisional_mask()
         if prov is not None:
             target[prov & (target == FREE)] = OCCUPIED
-        soft = self._soft_mask(target, prov)
-        diff = (target != self._loc_cells) | (soft != self._loc_soft)
+        diff = target != self._loc_cells
         if diff.any():
             lab, _ = ndimage.label(ndimage.binary_dilation(diff, iterations=2))
             for sl in ndimage.find_objects(lab):
                 if sl is None:
                     continue
-                self._pending.append((target[sl].copy(), sl[1].start, sl[0].start,
-                                      soft[sl].copy()))
+                cells = target[sl].copy()
+                self._pending.append((cells, sl[1].start, sl[0].start))
         self._loc_cells = target
-        self._loc_soft = soft
-
-    def _soft_mask(self, target: np.ndarray, prov: np.ndarray | None) -> np.ndarray:
-        """(H, W) bool: the occupied cells of ``target`` the localizer should treat as soft
-        (``localizer_soft_objects``). Beyond the paper: a piece that may have moved since it
-        was last seen is weaker evidence of the robot's pose than a wall."""
-        mode = self.cfg.localizer_soft_objects
-        if mode == "none":
-            return np.zeros(target.shape, dtype=bool)
-        idx = [i for i, o in enumerate(self.object_map.objects)
-               if not o.structure and o.status in ("U", "M")
-               and (mode == "furniture" or o.status == "M" or o.moved_count > 0)]
-        soft = np.isin(self._owner, idx)
-        if prov is not None:  # the provisional landmarks, not what the map has under them
-            soft |= prov & (self._grid.cells != OCCUPIED)
-        return soft & (target == OCCUPIED)
 
     def _provisional_mask(self) -> np.ndarray | None:
         """Cells of the provisional landmarks (bool, the grid's shape), or None (none, or the
@@ -299,7 +279,6 @@ class GatmoMapper:
         self._near_returns[:] = 0
         self._reset_run_evidence()
         self._run_open = True
-        self._sync_localizer()  # the soft objects, from the run's first scan
 
     def end_run(self) -> list[Event]:
         """Dominant chairs seen this run and never matched become new objects (in M)."""

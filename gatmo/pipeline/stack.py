@@ -278,7 +278,7 @@ class LocalizationStack:
     Args:
         localizer: a :class:`gatmo.localization.mcl.MonteCarloLocalizer` (or anything with
             ``update(odom_pose_xytheta, scan) -> PoseEstimate`` and
-            ``update_map_region(cells_new, ix0, iy0, soft_new)``).
+            ``update_map_region(cells_new, ix0, iy0)``).
         matcher: a scan matcher with ``register(scan) -> MatchResult`` whose ``pose_xytheta`` is
             the base pose in the matcher's own frame, or None (localizer pose published as is).
         mapper: a :class:`gatmo.objects.mapper.GatmoMapper` or None (static map).
@@ -333,12 +333,6 @@ class LocalizationStack:
         self._travel_m = 0.0
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
-            self._apply_map_changes()  # the soft objects (gatmo.localizer_soft_objects)
-
-    def _apply_map_changes(self) -> None:
-        for cells_new, ix0, iy0, soft_new in self.mapper.pop_map_changes():
-            self.localizer.update_map_region(cells_new, ix0, iy0, soft_new)
-            self.n_map_updates += 1
 
     def _slid(self, loc_pose: np.ndarray, odom: np.ndarray) -> bool:
         """The filter's pose moved more than ``slide_max_m`` against odometry since the newest
@@ -460,8 +454,8 @@ class LocalizationStack:
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
                                         stamp_s=scan.stamp_s, pose_verified=verified,
                                         track=track)
-            for cells_new, ix0, iy0, soft_new in self.mapper.pop_map_changes():
-                self.localizer.update_map_region(cells_new, ix0, iy0, soft_new)
+            for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
+                self.localizer.update_map_region(cells_new, ix0, iy0)
                 changed = True
                 self.n_map_updates += 1
             if changed and self._aligner is not None:
@@ -562,7 +556,9 @@ class LocalizationStack:
         if self.mapper is None:
             return []
         events = list(self.mapper.end_run())
-        self._apply_map_changes()
+        for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
+            self.localizer.update_map_region(cells_new, ix0, iy0)
+            self.n_map_updates += 1
         self._aligner = None  # rebuilt from the new map on first use
         return events
 

@@ -5,7 +5,6 @@ updates equal a full recompute."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -236,66 +235,3 @@ def test_range_table_update_equals_rebuild():
         np.testing.assert_array_equal(lut.cast(g, poses, angles), fresh.cast(g, poses, angles))
         live = lut.index[lut.index >= 0]
         np.testing.assert_array_equal(lut.ranges[live], fresh.ranges[fresh.index[lut.index >= 0]])
-
-
-@settings(max_examples=40, deadline=None)
-@given(
-    seed=st.integers(0, 10_000),
-    x0=st.integers(0, 50), y0=st.integers(0, 40), w=st.integers(1, 15), h=st.integers(1, 15),
-    max_dist=st.sampled_from([0.1, 0.3, 0.55]),
-    factor=st.sampled_from([1.0, 1.5, 2.0, 3.0]),
-    offset=st.sampled_from([0.0, 0.05, 0.12]),
-)
-def test_region_update_with_soft_cells_equals_full_recompute(seed, x0, y0, w, h, max_dist,
-                                                             factor, offset):
-    rng = np.random.default_rng(seed)
-    cells = np.where(rng.random((45, 60)) < 0.05, OCCUPIED, FREE).astype(np.int8)
-    soft = rng.random((45, 60)) < 0.5
-    field = LikelihoodField(OccupancyGrid(cells.copy(), 0.05), max_dist, factor, soft, offset)
-    patch = np.where(rng.random((h, w)) < 0.3, OCCUPIED, FREE).astype(np.int8)
-    soft_patch = rng.random((h, w)) < 0.5
-    field.update_region(patch, x0, y0, soft_patch)
-    hh, ww = max(0, min(h, 45 - y0)), max(0, min(w, 60 - x0))
-    expect, expect_soft = cells.copy(), soft.copy()
-    expect[y0 : y0 + h, x0 : x0 + w] = patch[:hh, :ww]
-    expect_soft[y0 : y0 + h, x0 : x0 + w] = soft_patch[:hh, :ww]
-    full = LikelihoodField(OccupancyGrid(expect, 0.05), max_dist, factor, expect_soft, offset)
-    np.testing.assert_array_equal(field.soft, expect_soft)
-    np.testing.assert_array_equal(field.dist_m, full.dist_m)
-
-
-def test_soft_cells_widen_the_gaussian_by_the_factor():
-    g = room_grid(5, 4, 0.05, boxes=[(2, 2, 2.4, 2.4)])
-    box = np.zeros(g.cells.shape, dtype=bool)
-    box[40:48, 40:48] = True  # the box's cells (and free cells, which are ignored)
-    hard = LikelihoodField(g.copy(), 1.0)
-    soft = LikelihoodField(g.copy(), 1.0, soft_factor=2.0, soft=box)
-    probe = np.array([[2.2, 2.6], [2.2, 2.8], [0.3, 2.0]])  # 0.2 / 0.4 m off the box; by a wall
-    dh, ds = hard.distance_at(probe), soft.distance_at(probe)
-    np.testing.assert_allclose(ds[:2], dh[:2] / 2.0, atol=0.026)  # half a cell of raster
-    assert ds[2] == dh[2]  # walls stay hard
-    # and a soft map with factor 1 is the plain field
-    np.testing.assert_array_equal(LikelihoodField(g.copy(), 1.0, 1.0, box).dist_m, hard.dist_m)
-    with pytest.raises(ValueError):
-        LikelihoodField(g.copy(), 1.0, soft_factor=0.5)
-
-
-def test_a_soft_hit_weight_lowers_the_gaussian_around_soft_cells_only():
-    from gatmo.localization.config import AmclConfig
-    from gatmo.localization.mcl import MonteCarloLocalizer
-
-    g = room_grid(5, 4, 0.05, boxes=[(2, 2, 2.4, 2.4)])
-    box = np.zeros(g.cells.shape, dtype=bool)
-    box[40:48, 40:48] = True
-    cfg = AmclConfig(sigma_hit_m=0.1, soft_hit_weight=0.25)
-    loc = MonteCarloLocalizer(g, cfg, np.random.default_rng(0))
-    loc.update_map_region(g.cells[40:48, 40:48].copy(), 40, 40, box[40:48, 40:48])
-    probe = np.array([[2.2, 2.4], [2.2, 2.45], [0.15, 2.0]])  # on the box, 5 cm off; a wall
-    d = loc.field.distance_at(probe)
-    d_hard = LikelihoodField(g.copy(), cfg.laser_likelihood_max_dist_m).distance_at(probe)
-
-    def hit(d):
-        return np.exp(-(d**2) / (2 * cfg.sigma_hit_m**2))
-
-    np.testing.assert_allclose(hit(d[:2]), 0.25 * hit(d_hard[:2]), rtol=1e-9)
-    assert d[2] == d_hard[2]

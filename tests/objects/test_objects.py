@@ -1012,7 +1012,7 @@ def test_a_still_chair_not_in_the_map_holds_the_localizer_while_the_run_lasts(pr
     loc = grid.cells.copy()
 
     def apply_changes():
-        for cells, ix0, iy0, _ in m.pop_map_changes():
+        for cells, ix0, iy0 in m.pop_map_changes():
             loc[iy0:iy0 + cells.shape[0], ix0:ix0 + cells.shape[1]] = cells
 
     box = (6.0, 4.6, 6.5, 5.1)
@@ -1049,46 +1049,3 @@ def test_a_still_chair_not_in_the_map_holds_the_localizer_while_the_run_lasts(pr
     apply_changes()
     assert m.grid().occupied[near_box].sum() >= 10  # added at the run's end
     np.testing.assert_array_equal(loc, m.grid().cells)
-
-
-@pytest.mark.parametrize("mode", ["none", "furniture", "movable"])
-def test_the_localizer_is_told_which_cells_are_furniture_that_may_move(mode):
-    from gatmo.maps.likelihood import LikelihoodField
-
-    g = room_grid(10, 6, 0.05, boxes=[(6.0, 2.0, 6.7, 2.7)])
-    om = ObjectMap.from_grid(g, CFG)
-    box = [o for o in om.objects if not o.structure][0]
-    true_new = np.array([3.9, 4.3, 0.4])
-    world = room_grid(10, 6, 0.05)
-    c = world.world_to_cell(transform_points(true_new, box.shape_xy))
-    world.cells[c[:, 1], c[:, 0]] = 100
-    m = GatmoMapper(om, g, CFG.model_copy(update={"localizer_soft_objects": mode}))
-    field = LikelihoodField(g.copy(), 2.0, soft_factor=2.0)  # the localizer's
-
-    def apply_changes():
-        for cells, ix0, iy0, soft in m.pop_map_changes():
-            field.update_region(cells, ix0, iy0, soft)
-
-    def box_cells():  # as the map renders it (a turned box: 4 points per cell)
-        c = m.grid().world_to_cell(box.cells_world(dense=True))
-        mask = np.zeros(g.cells.shape, dtype=bool)
-        mask[c[:, 1], c[:, 0]] = True
-        return mask & m.grid().occupied
-
-    m.begin_run(1)
-    apply_changes()
-    np.testing.assert_array_equal(field.soft, box_cells() if mode == "furniture" else False)
-    path = [(x, 2.9, 0.0) for x in np.linspace(2.0, 5.0, 40)]
-    path += [(5.0, 2.9, th) for th in np.linspace(0, 2.6, 20)]
-    path += [(5.0 - 0.02 * k, 2.9 + 0.01 * k, 2.6) for k in range(40)]
-    for i, pose in enumerate(path):
-        s = make_scan(world, pose, n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
-        m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
-        apply_changes()
-    assert box.moved_count == 1  # relocated (test_end_to_end_moved_box_is_relocated_with_its_id)
-    # the walls are never soft; the relocated box is, unless the option is off
-    np.testing.assert_array_equal(field.soft, box_cells() if mode != "none" else False)
-    assert box_cells().sum() > 20
-    full = LikelihoodField(m.grid(), 2.0, soft_factor=2.0, soft=field.soft)
-    np.testing.assert_array_equal(field.grid.cells, m.grid().cells)
-    np.testing.assert_array_equal(field.dist_m, full.dist_m)

@@ -34,7 +34,7 @@ class ScriptedLocalizer:
         std = 0.05 if i in self.confident_at else 0.6
         return Est(self.truth[i] + self.bias, np.diag([std**2, std**2, 0.01**2]))
 
-    def update_map_region(self, cells, ix0, iy0, soft=None):
+    def update_map_region(self, cells, ix0, iy0):
         self.regions.append((cells.shape, ix0, iy0))
 
 
