@@ -813,9 +813,9 @@ class GatmoMapper:
         """Beyond the paper: beams of this scan pass well beyond walls or columns where the
         map has them (``structure_through_min_beams`` of them, ``structure_through_fraction``
         of the beams passing or ending on structure). Structure never moves, so the pose is
-        wrong, however well furniture fits it: on tuning hall seeds 300, 301, 303 and 305 the scans the
-        stack trusted whose pose was more than 0.1 m off include some (64 of 709), and none
-        of 1,973 within 0.1 m did, nor any of them at the true poses."""
+        wrong, however well furniture fits it. Of the scans the stack trusted on tuning hall
+        seeds 300, 301, 303 and 305, 64 of the 709 whose pose was more than 0.1 m off have
+        such beams, none of the 1,973 within 0.1 m, and none of them at the true poses."""
         own, _, through, on = beams[:4]
         s = own == STRUCTURE
         t, h = int((through & s).sum()), int((on & s).sum())
