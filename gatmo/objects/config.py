@@ -64,17 +64,6 @@ class GatmoConfig(GatmoModel):
         0.5, ge=0, le=1, description="of the objects in view, at most this many (or one) may be "
         "left out; more gone at once means a wrong pose")
     agreement_min_beams: int = Field(20, ge=1, description="fewer: the scan is skipped")
-    structure_check: bool = Field(
-        False, description="beyond the paper: a scan whose beams pass through walls or "
-        "columns (structure, which never moves) is from a wrong pose, however well the rest "
-        "of it fits, and is skipped: at least structure_through_min_beams of the beams the "
-        "map expects to end on structure, and structure_through_fraction of those that pass "
-        "or end there, pass well beyond it")
-    structure_through_min_beams: int = Field(
-        2, ge=1, description="structure_check: beams through structure that skip a scan")
-    structure_through_fraction: float = Field(
-        0.1, gt=0, le=1, description="structure_check: of the beams passing or ending on "
-        "structure, the fraction passing that skips a scan")
     min_explained_fraction: float = Field(0.3, ge=0, le=1,
                                           description="returns the map explains, else skip")
     # unexplained returns

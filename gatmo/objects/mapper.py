@@ -123,8 +123,7 @@ class GatmoMapper:
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "absence_vetoed": 0,
-                       "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
-                       "skipped_through_structure": 0}
+                       "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0}
         self._ms: list[float] = []
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
@@ -350,10 +349,6 @@ class GatmoMapper:
             # that stayed) is where this pose says; a wrong pose sees through small objects
             # and makes phantom chairs, so the scan is skipped
             self.counts["skipped_disagreement"] += 1
-            self._expire(stamp_s, events)
-            return events
-        if self.cfg.structure_check and self._through_structure(beams):
-            self.counts["skipped_through_structure"] += 1
             self._expire(stamp_s, events)
             return events
         self._count_near_returns(pts, lp)
@@ -808,19 +803,6 @@ class GatmoMapper:
             # through every piece), not the room; the plain test decides
             keep[:] = True
         return int((through & keep).sum() + (on & keep).sum()), int((on & keep).sum())
-
-    def _through_structure(self, beams) -> bool:
-        """Beyond the paper: beams of this scan pass well beyond walls or columns where the
-        map has them (``structure_through_min_beams`` of them, ``structure_through_fraction``
-        of the beams passing or ending on structure). Structure never moves, so the pose is
-        wrong, however well furniture fits it. Of the scans the stack trusted on tuning hall
-        seeds 300, 301, 303 and 305, 64 of the 709 whose pose was more than 0.1 m off have
-        such beams, none of the 1,973 within 0.1 m, and none of them at the true poses."""
-        own, _, through, on = beams[:4]
-        s = own == STRUCTURE
-        t, h = int((through & s).sum()), int((on & s).sum())
-        c = self.cfg
-        return t >= c.structure_through_min_beams and t >= c.structure_through_fraction * (t + h)
 
     def _beam_evidence(self, beams) -> set[int]:
         """Beyond Alg. 1, robust to pose errors of a cell or two: the beams the current map says

@@ -1049,27 +1049,3 @@ def test_a_still_chair_not_in_the_map_holds_the_localizer_while_the_run_lasts(pr
     apply_changes()
     assert m.grid().occupied[near_box].sum() >= 10  # added at the run's end
     np.testing.assert_array_equal(loc, m.grid().cells)
-
-
-@pytest.mark.parametrize("check", [False, True])
-def test_a_pose_whose_beams_pass_through_walls_is_not_used(check):
-    # the robot stands among three pieces, all shifted 0.5 m up since the map was made; at a
-    # pose 0.5 m too low they fit the map, and only the few beams that reach the bottom wall
-    # say the pose is wrong: they end 0.5 m beyond it (the hall's failure: the scan-to-map
-    # alignment puts the robot where the shifted pieces fit)
-    pieces = [(3.6, 0.6, 4.4, 2.7), (5.6, 0.6, 6.4, 2.7), (4.55, 2.8, 5.45, 3.3)]
-    g = room_grid(10, 6, 0.05, boxes=pieces)
-    world = room_grid(10, 6, 0.05, boxes=[(a, b + 0.5, c, d + 0.5) for a, b, c, d in pieces])
-    cfg = CFG.model_copy(update={"structure_check": check})
-    m = GatmoMapper.from_config(cfg, g)
-    assert sum(not o.structure for o in m.object_map.objects) == 3
-    m.begin_run(1)
-    for i, y in enumerate(np.linspace(2.4, 2.6, 5)):
-        s = make_scan(world, (5.0, y, 0.0), n_beams=361, max_range_m=3.0, stamp_s=i)
-        m.update(np.array([5.0, y - 0.5, 0.0]), s, pose_confident=True, stamp_s=i)
-    assert m.counts["skipped_disagreement"] == 0  # the pieces outvote the wall
-    assert m.counts["skipped_through_structure"] == (5 if check else 0)
-    for i, y in enumerate(np.linspace(1.9, 2.1, 5)):  # the right pose in the mapped room
-        s = make_scan(g, (5.0, y, 0.0), n_beams=361, max_range_m=3.0, stamp_s=10 + i)
-        m.update(np.array([5.0, y, 0.0]), s, pose_confident=True, stamp_s=10 + i)
-    assert m.counts["skipped_through_structure"] == (5 if check else 0)
