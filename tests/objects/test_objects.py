@@ -1049,3 +1049,68 @@ def test_a_still_chair_not_in_the_map_holds_the_localizer_while_the_run_lasts(pr
     apply_changes()
     assert m.grid().occupied[near_box].sum() >= 10  # added at the run's end
     np.testing.assert_array_equal(loc, m.grid().cells)
+
+
+@pytest.mark.parametrize("settle", [False, True])
+@pytest.mark.parametrize("provisional", [False, True])
+def test_a_waiting_match_moves_the_object_in_the_localizers_map_only(provisional, settle):
+    """The ambiguity scenario above, stopped while the match still waits: with
+    ``provisional_relocation`` the localizer's map (GATMO's region updates applied to the
+    static map) has the box drawn at its waiting match, on the desk's near end, while GATMO's
+    own map has nothing there; at the run's end the localizer's map is GATMO's again (the box
+    relocated there if settling took the match, else a new object added there)."""
+    cfg = CFG.model_copy(update={"track_range_margin_m": 0.0, "match_ambiguity_wait": True,
+                                 "match_ambiguity_patience_scans": 100,
+                                 "match_ambiguity_settle": settle,
+                                 "provisional_relocation": provisional})
+    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
+    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
+    m = GatmoMapper.from_config(cfg, g)
+    m.begin_run(1)
+    loc = g.cells.copy()
+
+    def apply_changes():
+        for cells, ix0, iy0 in m.pop_map_changes():
+            loc[iy0:iy0 + cells.shape[0], ix0:ix0 + cells.shape[1]] = cells
+
+    box = min((o for o in m.object_map.objects if not o.structure), key=lambda o: len(o.shape_xy))
+    path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]
+    path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)][:40]
+    for i, pose in enumerate(path):
+        s = make_scan(world, pose, n_beams=361, max_range_m=4.0, stamp_s=0.1 * i)
+        m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
+        apply_changes()
+    assert box.status == "A" and m.counts["ambiguous"] > 0
+    c = g.world_to_cell(np.array([[4.7, 4.1], [5.4, 5.7]]))
+    desk = np.zeros(g.cells.shape, dtype=bool)
+    desk[c[0, 1]:c[1, 1] + 1, c[0, 0]:c[1, 0] + 1] = True
+    assert not m.grid().occupied[desk].any()  # GATMO's own map waits
+    on_desk = np.array([[4.8, 4.5]])  # the desk's near face, where the box's match puts it
+    if provisional:
+        assert (loc[desk] == 100).sum() >= 10
+        assert not (loc[~desk] != m.grid().cells[~desk]).any()
+        assert not m.unexplained_at(on_desk).any()
+    else:
+        np.testing.assert_array_equal(loc, m.grid().cells)
+        assert m.unexplained_at(on_desk).all()
+    events = m.end_run()
+    apply_changes()
+    np.testing.assert_array_equal(loc, m.grid().cells)
+    kinds = [e.kind for e in events]
+    # the box relocated there, or (not settling) what was seen joins the map as a new object
+    assert ("relocated" in kinds) == settle and ("added" in kinds) != settle
+    assert m.grid().occupied[desk].any()
+
+
+def test_render_draws_an_object_at_a_pose_given_instead_of_its_own():
+    g = room_grid(8, 6, 0.05, boxes=[(2.0, 2.0, 2.5, 2.5)])
+    om = ObjectMap.from_grid(g, GatmoConfig())
+    box = [o for o in om.objects if not o.structure][0]
+    at = box.pose_xytheta + np.array([3.0, 1.0, 0.0])
+    moved = om.render(g, {box.id: at}).occupied
+    here = om.render(g).occupied
+    shifted = g.world_to_cell(box.cells_world(at))
+    old = g.world_to_cell(box.cells_world())
+    assert moved[shifted[:, 1], shifted[:, 0]].all() and not moved[old[:, 1], old[:, 0]].any()
+    assert here[old[:, 1], old[:, 0]].all() and not here[shifted[:, 1], shifted[:, 0]].any()
+    assert box.pose_xytheta[0] == at[0] - 3.0  # the object itself did not move
