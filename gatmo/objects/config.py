@@ -195,12 +195,6 @@ class GatmoConfig(GatmoModel):
         "longer withheld as unexplained; GATMO's own map and the saved map do not change. A "
         "chair whose match waits (match_ambiguity_wait) or that joins Gamma still holds the "
         "filter where a wrong identity would have put the right outline")
-    provisional_relocation: bool = Field(
-        False, description="beyond the paper, with match_ambiguity_wait: while a chair's match "
-        "waits on ambiguity, the localizer's map has the best candidate at that match already "
-        "(taken off its old place, drawn at the new one) and returns on it are no longer "
-        "withheld as unexplained; GATMO's own map, its events and the saved map wait for the "
-        "match. Waiting then costs the localizer what relocating at once would have")
     provisional_min_verified_scans: int = Field(
         9, ge=1, description="scans of a track from confirmed poses before its outline is a "
         "provisional landmark")

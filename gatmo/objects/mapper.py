@@ -134,7 +134,6 @@ class GatmoMapper:
         self._prov_near: np.ndarray | None = None  # cells within delta_W of such outlines
         self._run_open = False  # between begin_run and end_run
         self._prov_tick = 0  # scans GATMO took, for provisional_every_scans
-        self._prov_dirty = False  # a waiting match changed (provisional_relocation)
         self._reset_run_evidence()
         self._build_owner()
 
@@ -229,19 +228,11 @@ class GatmoMapper:
 
     def _sync_localizer(self) -> None:
         """Queue region updates that bring the localizer's map to the reconfigured map plus
-        the provisional landmarks (``provisional_landmarks``), with the objects whose match
-        waits on ambiguity at that match (``provisional_relocation``)."""
-        self._prov_dirty = False
-        moves = self._provisional_moves()
-        target = (self.object_map.render(self.base, moves) if moves else self._grid).cells.copy()
+        the provisional landmarks (``provisional_landmarks``)."""
+        target = self._grid.cells.copy()
         prov = self._provisional_mask()
         if prov is not None:
             target[prov & (target == FREE)] = OCCUPIED
-        if moves:  # returns on the moved outlines are no longer withheld (unexplained_at)
-            pts = np.vstack([self.object_map.by_id[oid].cells_world(p)
-                             for oid, p in moves.items()])
-            near = self._disk_dilation(self._cell_mask(pts))
-            self._prov_near = near if self._prov_near is None else self._prov_near | near
         diff = target != self._loc_cells
         if diff.any():
             lab, _ = ndimage.label(ndimage.binary_dilation(diff, iterations=2))
@@ -267,44 +258,15 @@ class GatmoMapper:
                   if o.id in self._gamma_this_run]
         if not parts:
             return None
-        mask = self._cell_mask(np.vstack(parts))
-        self._prov_near = self._disk_dilation(mask)
-        return mask
-
-    def _cell_mask(self, points_xy: np.ndarray) -> np.ndarray:
-        """(H, W) bool: the grid cells that map-frame points (N, 2) fall in."""
         g = self._grid
-        cells = g.world_to_cell(points_xy)
+        cells = g.world_to_cell(np.vstack(parts))
         cells = cells[g.in_bounds(cells)]
         mask = np.zeros(g.cells.shape, dtype=bool)
         mask[cells[:, 1], cells[:, 0]] = True
-        return mask
-
-    def _disk_dilation(self, mask: np.ndarray) -> np.ndarray:
-        """``mask`` grown by delta_W (a disk)."""
-        r = int(np.ceil(self.cfg.delta_W_m / self._grid.resolution_m))
+        r = int(np.ceil(c.delta_W_m / g.resolution_m))
         yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-        return ndimage.binary_dilation(mask, structure=xx**2 + yy**2 <= r * r)
-
-    def _provisional_moves(self) -> dict[int, np.ndarray]:
-        """Object id -> the pose its waiting match puts it at (``provisional_relocation``):
-        per object, the track with most scans from confirmed poses; none once the object was
-        moved, taken off the map or matched by anything else since the match began to wait."""
-        if not self.cfg.provisional_relocation or not self._run_open:
-            return {}
-        best: dict[int, tuple[int, np.ndarray]] = {}
-        by_id = self.object_map.by_id
-        for m in self._meta:
-            if m.matched_object is not None or m.provisional is None:
-                continue
-            oid, pose, pose_then, status_then = m.provisional
-            o = by_id.get(oid)
-            if (o is None or o.structure or o.status != status_then
-                    or not np.allclose(o.pose_xytheta, pose_then)):
-                continue
-            if oid not in best or m.n_verified > best[oid][0]:
-                best[oid] = (m.n_verified, pose)
-        return {oid: pose for oid, (_, pose) in best.items()}
+        self._prov_near = ndimage.binary_dilation(mask, structure=xx**2 + yy**2 <= r * r)
+        return mask
 
     # ------------------------------------------------------------------ runs
     def begin_run(self, run_id: int) -> None:
@@ -417,9 +379,9 @@ class GatmoMapper:
             self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
                         verified=bool(pose_verified))
         self._expire(stamp_s, events)
-        if self.cfg.provisional_landmarks or self.cfg.provisional_relocation:
+        if self.cfg.provisional_landmarks:
             self._prov_tick += 1
-            if self._prov_dirty or self._prov_tick % self.cfg.provisional_every_scans == 0:
+            if self._prov_tick % self.cfg.provisional_every_scans == 0:
                 self._sync_localizer()
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
@@ -1097,10 +1059,6 @@ class GatmoMapper:
                 and m.n_obs < self.cfg.match_ambiguity_patience_scans
                 and self._ambiguous(m, o, mt, view)):
             m.waited = True
-            if self.cfg.provisional_relocation:
-                m.provisional = (o.id, np.asarray(mt.pose_xytheta, dtype=float).copy(),
-                                 o.pose_xytheta.copy(), o.status)
-                self._prov_dirty = True
             return False
         patient = m.n_obs < self.cfg.match_patience_scans
         if patient:

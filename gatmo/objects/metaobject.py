@@ -41,9 +41,6 @@ class Metaobject:
         self.centres: list[np.ndarray] = []
         self.matched_object: int | None = None
         self.waited = False  # a match was held back as ambiguous (GatmoMapper._ambiguous)
-        # (object id, match pose, the object's pose and status then) of the waiting match
-        # (GatmoMapper._provisional_moves), or None
-        self.provisional: tuple | None = None
         # the scans that saw it (set by the mapper): laser pose, angles, ranges, reach
         self.views: list[tuple] = []
         self._add(points, stamp_s, verified)
@@ -220,5 +217,3 @@ class Metaobject:
         self.ll_person = min(self.ll_person, other.ll_person)
         if self.matched_object is None:
             self.matched_object = other.matched_object
-        if self.provisional is None:
-            self.provisional = other.provisional

@@ -150,12 +150,9 @@ class ObjectMap:
         """Objects drawn in the map: U and M."""
         return [o for o in self.objects if o.status in ("U", "M")]
 
-    def render(self, base: OccupancyGrid,
-               poses: dict[int, np.ndarray] | None = None) -> OccupancyGrid:
+    def render(self, base: OccupancyGrid) -> OccupancyGrid:
         """The reconfigured map: ``base`` with every object's footprint in the base map cleared,
-        then the placed objects (U, M) drawn at their current poses. ``poses``: object id ->
-        map-frame pose (x, y, theta) to draw that object at instead (placed or not)."""
-        poses = poses or {}
+        then the placed objects (U, M) drawn at their current poses."""
         g = base.copy()
         for o in self.objects:
             if o.structure or o.base_pose_xytheta is None:
@@ -164,16 +161,9 @@ class ObjectMap:
             c = c[g.in_bounds(c)]
             g.cells[c[:, 1], c[:, 0]] = FREE
         for o in self.placed():
-            if o.id in poses:
-                continue
             moved = o.base_pose_xytheta is None or not np.allclose(o.pose_xytheta,
                                                                      o.base_pose_xytheta)
             c = g.world_to_cell(o.cells_world(dense=moved))
-            c = c[g.in_bounds(c)]
-            g.cells[c[:, 1], c[:, 0]] = OCCUPIED
-        by_id = self.by_id
-        for oid, pose in poses.items():
-            c = g.world_to_cell(by_id[oid].cells_world(np.asarray(pose, dtype=float), dense=True))
             c = c[g.in_bounds(c)]
             g.cells[c[:, 1], c[:, 0]] = OCCUPIED
         return g
