@@ -112,6 +112,20 @@ class AmclConfig(GatmoModel):
     max_coast_m: float = Field(
         3.0, gt=0, description="longest odometry-only stretch min_explained_beam_fraction allows"
     )
+    segment_balanced: bool = Field(
+        False,
+        description=(
+            "likelihood_field_prob (not an AMCL parameter): the scan is cut into segments "
+            "where neighbouring beams' ranges jump by more than segment_jump_m, and a "
+            "segment of more than segment_max_beams beams counts as that many (each beam's "
+            "log-likelihood weighed down alike), so one long surface cannot outvote the "
+            "other things in view. In a hall where a 4 m laser sees three or four pieces, one "
+            "moved piece seen from close by has more beams than the rest together and pulls "
+            "the filter along with it"
+        ),
+    )
+    segment_max_beams: int = Field(5, ge=1, description="see segment_balanced")
+    segment_jump_m: float = Field(0.3, gt=0, description="see segment_balanced")
     do_beamskip: bool = False
     beam_skip_distance_m: float = Field(0.5, gt=0)
     beam_skip_threshold: float = Field(0.3, ge=0, le=1)

@@ -11,6 +11,25 @@ from gatmo.maps.grid import FREE, OCCUPIED
 from gatmo.maps.likelihood import LikelihoodField
 
 
+def segment_weights(ranges_m: np.ndarray, angles_rad: np.ndarray, jump_m: float,
+                    max_beams: int) -> np.ndarray:
+    """Per-beam weights (B,) that make each segment of the scan count as at most ``max_beams``
+    beams. A segment is a run of beams adjacent in the selection (sorted by angle) whose
+    ranges differ by at most ``jump_m`` from one to the next and with no gap in angle of more
+    than twice the median step. ``ranges_m``, ``angles_rad``: (B,) selected beams."""
+    b = len(ranges_m)
+    if b == 0:
+        return np.zeros(0)
+    cut = np.zeros(b, dtype=bool)
+    if b > 1:
+        da = np.abs(np.diff(angles_rad))
+        step = float(np.median(da)) if np.any(da > 0) else 0.0
+        cut[1:] = (np.abs(np.diff(ranges_m)) > jump_m) | (da > 2.0 * step + 1e-9)
+    seg = np.cumsum(cut)
+    n = np.bincount(seg)
+    return np.minimum(1.0, max_beams / n[seg])
+
+
 def select_beams(scan: Scan, max_beams: int, range_min_m: float | None,
                  range_max_m: float | None, keep_max_range: bool):
     """AMCL's beam subsampling (step = (n - 1) // (max_beams - 1)) and range gating.
@@ -320,13 +339,19 @@ class SensorModel:
         if gate_unexplained and self.last_explained_fraction < c.min_explained_beam_fraction:
             self.last_gated = True
             return np.zeros(len(particles)), 0
+        skip = False
         if c.do_beamskip and converged:
             # AMCL: skip beams that most particles cannot explain (likely unmapped obstacles),
             # unless that would skip too many of them
             frac = (zs < c.beam_skip_distance_m).mean(axis=0)
             use = frac >= c.beam_skip_threshold
-            if use.mean() >= 1.0 - c.beam_skip_error_threshold:
-                denom = 2 * c.sigma_hit_m**2
-                pz = c.z_hit * np.exp(-(zs**2) / denom) + c.z_rand / rmax
-                logp = np.log(pz[:, use]).sum(axis=1)
+            skip = use.mean() >= 1.0 - c.beam_skip_error_threshold
+            if not skip:
+                use = np.ones(len(ranges), dtype=np.bool_)
+        if skip or c.segment_balanced:
+            w = (segment_weights(ranges, angles, c.segment_jump_m, c.segment_max_beams)
+                 if c.segment_balanced else np.ones(len(ranges)))
+            denom = 2 * c.sigma_hit_m**2
+            pz = c.z_hit * np.exp(-(zs[:, use] ** 2) / denom) + c.z_rand / rmax
+            logp = np.log(pz) @ w[use]
         return logp, len(ranges)
