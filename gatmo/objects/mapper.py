@@ -1094,7 +1094,9 @@ class GatmoMapper:
         shapes: list[MapObject] = [o]
         for r in self.object_map.objects:
             movable = r.status in ("M", "A") or r.id in self._doubt
-            if (r.structure or r.status not in ("U", "M", "A") or not self._distinctive(r)
+            # (an object is no rival of itself: lookalike() says nothing of specks too small
+            # to call a shape, not even that one looks like itself)
+            if (r is o or r.structure or r.status not in ("U", "M", "A") or not self._distinctive(r)
                     or self._confirmed(r)
                     or (self.cfg.match_ambiguity_rivals == "movable" and not movable)
                     or any(lookalike(r, q, self.cfg.lookalike_tolerance) for q in shapes)):

@@ -215,6 +215,7 @@ def test_a_speck_is_not_relocated_far_away(small_object_area_m2, relocated):
     kinds = [(e.kind, e.object_id) for e in events]
     assert kinds[0] == ("absent", speck.id)
     assert (("relocated", speck.id) in kinds) == relocated
+    assert m.counts["ambiguous"] == 0  # the only speck is no rival of itself
     if relocated:
         assert np.hypot(*(speck.pose_xytheta[:2] - [3.075, 4.075])) < 0.1
     else:
