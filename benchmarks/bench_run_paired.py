@@ -34,9 +34,11 @@ from benchmarks._overrides import add_override_args
 
 OUT = Path("bench-out")
 FIGURES = ("ate_m", "lost", "found", "false_relocations", "twin_relocations")
-# B without --set-b (``make bench``): the eleventh session's provisional landmarks with the wait
-DEFAULT_B = ("gatmo.match_ambiguity_wait=true", "gatmo.match_ambiguity_settle=true",
-             "gatmo.provisional_landmarks=true", "gatmo.provisional_min_verified_scans=3")
+# B without --set-b (``make bench``): the matching defaults before 2026-11-26 (thirteenth
+# session), run by run against today's
+DEFAULT_B = ("gatmo.match_ambiguity_wait=false", "gatmo.match_ambiguity_settle=false",
+             "gatmo.provisional_landmarks=false", "gatmo.provisional_min_verified_scans=9",
+             "gatmo.match_min_score=0.8")
 
 
 def _one_run(cfg, base, objects_path, scans, log, gt, k, scenario, ties) -> dict:
