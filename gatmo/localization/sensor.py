@@ -339,19 +339,15 @@ class SensorModel:
         if gate_unexplained and self.last_explained_fraction < c.min_explained_beam_fraction:
             self.last_gated = True
             return np.zeros(len(particles)), 0
-        skip = False
         if c.do_beamskip and converged:
             # AMCL: skip beams that most particles cannot explain (likely unmapped obstacles),
             # unless that would skip too many of them
-            frac = (zs < c.beam_skip_distance_m).mean(axis=0)
-            use = frac >= c.beam_skip_threshold
-            skip = use.mean() >= 1.0 - c.beam_skip_error_threshold
-            if not skip:
-                use = np.ones(len(ranges), dtype=np.bool_)
-        if skip or c.segment_balanced:
+            explained = (zs < c.beam_skip_distance_m).mean(axis=0) >= c.beam_skip_threshold
+            if explained.mean() >= 1.0 - c.beam_skip_error_threshold:
+                use = explained
+        if c.segment_balanced or not use.all():
             w = (segment_weights(ranges, angles, c.segment_jump_m, c.segment_max_beams)
                  if c.segment_balanced else np.ones(len(ranges)))
-            denom = 2 * c.sigma_hit_m**2
-            pz = c.z_hit * np.exp(-(zs[:, use] ** 2) / denom) + c.z_rand / rmax
+            pz = c.z_hit * np.exp(-(zs[:, use] ** 2) / (2 * c.sigma_hit_m**2)) + c.z_rand / rmax
             logp = np.log(pz) @ w[use]
         return logp, len(ranges)

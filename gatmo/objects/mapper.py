@@ -239,8 +239,7 @@ class GatmoMapper:
             for sl in ndimage.find_objects(lab):
                 if sl is None:
                     continue
-                cells = target[sl].copy()
-                self._pending.append((cells, sl[1].start, sl[0].start))
+                self._pending.append((target[sl].copy(), sl[1].start, sl[0].start))
         self._loc_cells = target
 
     def _provisional_mask(self) -> np.ndarray | None:

@@ -334,6 +334,14 @@ class LocalizationStack:
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
+    def _apply_map_changes(self) -> bool:
+        """Hand GATMO's queued region updates to the localizer; True if there were any."""
+        changes = self.mapper.pop_map_changes()
+        for cells_new, ix0, iy0 in changes:
+            self.localizer.update_map_region(cells_new, ix0, iy0)
+        self.n_map_updates += len(changes)
+        return bool(changes)
+
     def _slid(self, loc_pose: np.ndarray, odom: np.ndarray) -> bool:
         """The filter's pose moved more than ``slide_max_m`` against odometry since the newest
         sample at least ``slide_window_m`` of travel back."""
@@ -454,10 +462,7 @@ class LocalizationStack:
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
                                         stamp_s=scan.stamp_s, pose_verified=verified,
                                         track=track)
-            for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
-                self.localizer.update_map_region(cells_new, ix0, iy0)
-                changed = True
-                self.n_map_updates += 1
+            changed = self._apply_map_changes()
             if changed and self._aligner is not None:
                 self._aligner.set_grid(self.mapper.grid())
         self.n_scans += 1
@@ -556,9 +561,7 @@ class LocalizationStack:
         if self.mapper is None:
             return []
         events = list(self.mapper.end_run())
-        for cells_new, ix0, iy0 in self.mapper.pop_map_changes():
-            self.localizer.update_map_region(cells_new, ix0, iy0)
-            self.n_map_updates += 1
+        self._apply_map_changes()
         self._aligner = None  # rebuilt from the new map on first use
         return events
 
