@@ -81,3 +81,65 @@ def relations_error(stamps_s, poses_xytheta, relations, *, max_dt_s: float = 0.0
         n_used=int(use.sum()),
         n_total=n_total,
     )
+
+
+def object_sightings(
+    cells_xy: np.ndarray,
+    laser_pose_xytheta: np.ndarray,
+    angles_rad: np.ndarray,
+    ranges_m: np.ndarray,
+    valid: np.ndarray,
+    *,
+    max_range_m: float,
+    cell_m: float = 0.05,
+    hit_tol_m: float = 0.1,
+    pass_margin_m: float = 0.2,
+) -> tuple[int, int]:
+    """How one scan saw a thing: (beams ending on it, beams passing through it).
+
+    ``cells_xy`` (M, 2) [m]: the thing's occupied cells in the map frame; ``laser_pose_xytheta``
+    (3,): the laser's pose in the map frame (from reference poses, not the estimate under test);
+    ``angles_rad``, ``ranges_m``, ``valid`` (B,): the scan. Each cell within ``max_range_m`` is
+    assigned the beam nearest its bearing, if that beam passes within half a cell diagonal of
+    it. A beam *hits* when its range is within ``hit_tol_m`` of one of its cells' distances,
+    *passes* when it is not a hit and ends (or, invalid, returns nothing) more than
+    ``pass_margin_m`` beyond its nearest cell: something stood there, or nothing did.
+    """
+    cells = np.asarray(cells_xy, dtype=float)
+    x, y, th = (float(v) for v in laser_pose_xytheta)
+    d = cells - (x, y)
+    r_c = np.hypot(d[:, 0], d[:, 1])
+    b_c = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - th)
+    angles = np.asarray(angles_rad, dtype=float)
+    near = (r_c < max_range_m) & (b_c >= angles[0] - 1e-9) & (b_c <= angles[-1] + 1e-9)
+    if not near.any():
+        return 0, 0
+    r_c, b_c = r_c[near], b_c[near]
+    j = np.clip(np.searchsorted(angles, b_c), 1, len(angles) - 1)
+    j = np.where(np.abs(angles[j - 1] - b_c) <= np.abs(angles[j] - b_c), j - 1, j)
+    on = r_c * np.abs(b_c - angles[j]) <= 0.5 * np.sqrt(2.0) * cell_m
+    if not on.any():
+        return 0, 0
+    j, r_c = j[on], r_c[on]
+    ranges = np.where(valid, np.asarray(ranges_m, dtype=float), np.inf)
+    hit_cell = np.abs(ranges[j] - r_c) <= hit_tol_m
+    beams = np.unique(j)
+    hit = np.zeros(len(angles), dtype=bool)
+    hit[j[hit_cell]] = True
+    nearest = np.full(len(angles), np.inf)
+    np.minimum.at(nearest, j, r_c)
+    passed = ~hit[beams] & (ranges[beams] > nearest[beams] + pass_margin_m)
+    return int(hit[beams].sum()), int(passed.sum())
+
+
+def visits(stamps_s: np.ndarray, seen: np.ndarray, *, gap_s: float = 30.0) -> list[tuple[int, int]]:
+    """Index ranges [first, last] of the scans with ``seen`` (N,) True, split where more than
+    ``gap_s`` seconds pass between two of them: the robot's separate visits to a place."""
+    idx = np.flatnonzero(np.asarray(seen, dtype=bool))
+    if len(idx) == 0:
+        return []
+    t = np.asarray(stamps_s, dtype=float)[idx]
+    cut = np.flatnonzero(np.diff(t) > gap_s)
+    starts = np.concatenate([[0], cut + 1])
+    ends = np.concatenate([cut, [len(idx) - 1]])
+    return [(int(idx[a]), int(idx[b])) for a, b in zip(starts, ends, strict=True)]

@@ -1,0 +1,173 @@
+"""Were the things GATMO added to the Intel map furniture, or people who stood still? (issue 5:
+no person becomes a map object, on real data).
+
+No ground truth labels the Intel lab's furniture. What tells a chair from a person is time: the
+robot passes the same rooms several times over the log's 45 minutes, and a person who stood
+still while it was near has gone when it comes back, where a chair is still there. For every
+object GATMO added at the end of the run (and, for contrast, every thing it tracked as still but
+did not add: Gamma), this replays the log at the *reference* poses (the gmapping-corrected log,
+independent of the stack under test) and counts, scan by scan, the beams ending on the thing's
+cells and the beams passing through them (``gatmo.datasets.metrics.object_sightings``). Scans
+that see it are grouped into visits (``visits``, gaps over 30 s); a visit is *there* when most
+of its scans see the thing, *gone* when most see through it.
+
+    python -m benchmarks.bench_real_compare --logs intel --demo-config   # writes the run
+    python -m benchmarks.bench_real_objects [--run bench-out/real_compare/intel-demo/cmp]
+
+Needs ../shared/data (skips with a message otherwise). Writes bench-out/real_objects.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+OUT = Path("bench-out")
+INTEL_SHIFT_S = 976052857.33753  # intel timestamps = corrected timestamps + this
+MIN_BEAMS = 3  # beams on (or through) a thing for a scan to count as seeing it (or not)
+SIGHT_M = 8.0  # farther, a 1 deg beam spacing is wider than a chair
+# the tracked outlines come from the stack's poses (0.1 m off at times), the rays from the
+# reference poses: a beam ending within this of an outline hits it; one ending this far beyond
+# the outline's nearest cell passes through
+HIT_TOL_M = 0.25
+PASS_MARGIN_M = 0.4
+MAP_CELLS = (10, 100)  # the control's size range, cells (a chair is 10-60)
+
+
+def sightings(objects: dict, scans) -> dict:
+    """{object id: (hits (N,), passes (N,))} over the scans (reference poses)."""
+    from gatmo.datasets.metrics import object_sightings
+    from gatmo.geometry import compose
+
+    centres = {k: c.mean(axis=0) for k, c in objects.items()}
+    out = {k: (np.zeros(len(scans), int), np.zeros(len(scans), int)) for k in objects}
+    for i, s in enumerate(scans):
+        lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
+        valid = s.valid
+        for k, cells in objects.items():
+            if np.hypot(*(centres[k] - lp[:2])) > SIGHT_M + 1.0:
+                continue
+            h, p = object_sightings(cells, lp, s.angles_rad, s.ranges_m, valid,
+                                    max_range_m=SIGHT_M, hit_tol_m=HIT_TOL_M,
+                                    pass_margin_m=PASS_MARGIN_M)
+            out[k][0][i], out[k][1][i] = h, p
+    return out
+
+
+def reference_scans(open_log, corrected: Path) -> list:
+    """The bag's 13,631 scans with reference poses: the corrected log has one pose every 3 s
+    (its FLASER pose, read as odometry); between two, the nearest one carried by the bag's
+    wheel odometry (over at most 1.5 s, a centimetre or two)."""
+    from gatmo.geometry import compose, interpolate_poses, relative
+
+    ref = list(open_log(corrected, skip_bad=True))
+    ref_t = np.array([s.stamp_s for s in ref]) + INTEL_SHIFT_S
+    ref_pose = np.array([s.gt_pose_xytheta if s.gt_pose_xytheta is not None
+                         else s.odom_pose_xytheta for s in ref])
+    scans = list(open_log(DATA / "slam-benchmark" / "intel.sort.bag", skip_bad=True))
+    t = np.array([s.stamp_s for s in scans])
+    odom = np.array([s.odom_pose_xytheta for s in scans])
+    keep = (t >= ref_t[0]) & (t <= ref_t[-1])
+    odom_at_ref = interpolate_poses(t, odom, ref_t)
+    k = np.clip(np.searchsorted(ref_t, t), 1, len(ref_t) - 1)
+    k = np.where(np.abs(ref_t[k - 1] - t) <= np.abs(ref_t[k] - t), k - 1, k)
+    out = []
+    for i in np.flatnonzero(keep):
+        s = scans[i]
+        s.gt_pose_xytheta = compose(ref_pose[k[i]], relative(odom_at_ref[k[i]], odom[i]))
+        out.append(s)
+    return out
+
+
+def verdicts(stamps_s: np.ndarray, hits: np.ndarray, passes: np.ndarray) -> list[dict]:
+    """The visits to one thing: start and end stamps [s], and there / gone / mixed."""
+    from gatmo.datasets.metrics import visits
+
+    there = (hits >= MIN_BEAMS) & (hits >= passes)
+    gone = (passes >= MIN_BEAMS) & (hits == 0)
+    out = []
+    for a, b in visits(stamps_s, there | gone):
+        n_there, n_gone = int(there[a:b + 1].sum()), int(gone[a:b + 1].sum())
+        kind = ("there" if n_there >= 2 * n_gone else "gone" if n_gone >= 2 * n_there
+                else "mixed")
+        out.append(dict(t0_s=float(stamps_s[a]), t1_s=float(stamps_s[b]), scans_there=n_there,
+                        scans_gone=n_gone, kind=kind))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--run", default=str(OUT / "real_compare" / "intel-demo" / "cmp"),
+                    help="a `gatmo compare` output directory of the Intel log")
+    args = ap.parse_args(argv or [])
+    corrected = DATA / "radish-corrected" / "intel-corrected.log.gz"
+    run = Path(args.run) / "gatmo" / "01_intel"
+    if not corrected.exists():
+        print(f"skipped: {corrected} not found (the corrected Intel log is needed)")
+        return 0
+    if not (run / "objects.json").exists():
+        print(f"skipped: {run / 'objects.json'} not found; run "
+              "`python -m benchmarks.bench_real_compare --logs intel --demo-config` first")
+        return 0
+    from gatmo.datasets.open import open_log
+    from gatmo.maps.object_io import load_objects
+
+    omap = load_objects(run / "objects.json")
+    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    added = {e["object_id"] for e in events if e["kind"] == "added"}
+    gamma = {e["object_id"] for e in events if e["kind"] == "gamma"} - added
+    first_seen = {e["object_id"]: e["stamp_s"] - INTEL_SHIFT_S for e in events
+                  if e["kind"] == "gamma"}
+    # the control: pieces of the static map of a chair's size, which the map says stand still
+    # (some are doors or things that came and went while the map was recorded)
+    control = {o.id for o in omap.objects if o.status == "U" and not o.structure
+               and MAP_CELLS[0] <= len(o.shape_xy) <= MAP_CELLS[1]}
+    group = {**{k: "map" for k in control}, **{k: "Gamma" for k in gamma},
+             **{k: "added" for k in added}}
+    things = {k: omap.by_id[k].cells_world() for k in sorted(group)}
+    scans = reference_scans(open_log, corrected)
+    stamps = np.array([s.stamp_s for s in scans]) - INTEL_SHIFT_S
+    seen = sightings(things, scans)
+    rows = []
+    for k, (h, p) in seen.items():
+        v = verdicts(stamps, h, p)
+        there = [x for x in v if x["kind"] == "there"]
+        span = there[-1]["t1_s"] - there[0]["t0_s"] if there else 0.0
+        rows.append(dict(
+            id=k, group=group[k], centre_xy=np.round(things[k].mean(axis=0), 2).tolist(),
+            tracked_at_s=round(first_seen.get(k, float("nan")) - stamps[0], 1),
+            visits=len(v), there=len(there), gone=sum(x["kind"] == "gone" for x in v),
+            mixed=sum(x["kind"] == "mixed" for x in v), there_span_s=round(span, 1),
+            # seen standing there on two visits a minute or more apart
+            persistent=bool(len(there) >= 2 and span >= 60.0), visit_list=v))
+    summary = {}
+    for g in ("added", "Gamma", "map"):
+        sel = [r for r in rows if r["group"] == g and r["visits"] > 0]
+        n_v = sum(r["visits"] for r in sel)
+        summary[g] = dict(
+            objects=len(sel), visits=n_v,
+            there_of_visits=sum(r["there"] for r in sel) / max(n_v, 1),
+            gone_of_visits=sum(r["gone"] for r in sel) / max(n_v, 1),
+            persistent=sum(r["persistent"] for r in sel),
+            never_there=sum(r["there"] == 0 for r in sel))
+        m = summary[g]
+        print(f"{g}: {m['objects']} seen on {n_v} visits; there on {m['there_of_visits']:.0%}, "
+              f"gone on {m['gone_of_visits']:.0%} of them; {m['persistent']} there on visits "
+              f">= 60 s apart, {m['never_there']} never seen there")
+        if g != "map":
+            for r in sel:
+                print(f"  {r['id']:4d} at {r['centre_xy']}: visits {r['visits']} (there "
+                      f"{r['there']}, gone {r['gone']}, mixed {r['mixed']}), there over "
+                      f"{r['there_span_s']} s")
+    OUT.mkdir(exist_ok=True)
+    (OUT / "real_objects.json").write_text(json.dumps({"summary": summary, "rows": rows},
+                                                        indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(__import__("sys").argv[1:]))
