@@ -223,6 +223,12 @@ def main(argv=None) -> int:
     total["found_over_seen_both"] = sum(o["outcome"] == "found" for o in both) / max(len(both), 1)
     total["found_or_twin_over_seen_both"] = sum(o["outcome"] in ("found", "twin")
                                                 for o in both) / max(len(both), 1)
+    # absence recall where the robot could notice it: moved pieces whose old place it saw
+    # through (>= 5 scans, true poses), taken off that place (absent, or relocated anywhere)
+    seen_old = [o for r in rows for o in r["outcomes"] if o["observed"] in ("both", "old")]
+    total["off_old_place_over_seen_old"] = sum(
+        o["outcome"] in ("found", "twin", "wrong", "absent") for o in seen_old) / max(
+        len(seen_old), 1)
     table = table_ii(rows)
     total["table_ii"] = table
     print(json.dumps(total, indent=1))

@@ -3,7 +3,8 @@ localizer vs the full stack, both with the same configuration and seed. People w
 and clutter comes and goes: GATMO must not make localization worse.
 
     python -m benchmarks.bench_real_compare [--logs intel,aces,mit-csail] [--max-scans N]
-                                            [--demo-config] [--set KEY=VALUE ...] [--tag NAME]
+                                            [--demo-config] [--split K]
+                                            [--set KEY=VALUE ...] [--tag NAME]
 
 Maps and reference poses:
 
@@ -54,6 +55,47 @@ def real_log_config(demo_model: bool = False):
     return cfg
 
 
+def intel_reference_scans() -> list:
+    """The bag's 13,631 scans with reference poses: the corrected log has one pose every 3 s
+    (its FLASER pose, read as odometry); between two, the nearest one carried by the bag's
+    wheel odometry (over at most 1.5 s, a centimetre or two)."""
+    from gatmo.datasets.open import open_log
+    from gatmo.geometry import compose, interpolate_poses, relative
+
+    corrected = DATA / "radish-corrected" / "intel-corrected.log.gz"
+    ref = list(open_log(corrected, skip_bad=True))
+    ref_t = np.array([s.stamp_s for s in ref]) + INTEL_SHIFT_S
+    ref_pose = np.array([s.gt_pose_xytheta if s.gt_pose_xytheta is not None
+                         else s.odom_pose_xytheta for s in ref])
+    scans = list(open_log(DATA / "slam-benchmark" / "intel.sort.bag", skip_bad=True))
+    t = np.array([s.stamp_s for s in scans])
+    odom = np.array([s.odom_pose_xytheta for s in scans])
+    keep = (t >= ref_t[0]) & (t <= ref_t[-1])
+    odom_at_ref = interpolate_poses(t, odom, ref_t)
+    k = np.clip(np.searchsorted(ref_t, t), 1, len(ref_t) - 1)
+    k = np.where(np.abs(ref_t[k - 1] - t) <= np.abs(ref_t[k] - t), k - 1, k)
+    out = []
+    for i in np.flatnonzero(keep):
+        s = scans[i]
+        s.gt_pose_xytheta = compose(ref_pose[k[i]], relative(odom_at_ref[k[i]], odom[i]))
+        out.append(s)
+    return out
+
+
+def split_log(k: int, out: Path) -> list[Path]:
+    """The Intel log cut into ``k`` CARMEN logs of equal scan counts, with the reference poses
+    (``intel_reference_scans``) as their true poses; cached in ``out``."""
+    from gatmo.datasets.carmen import write_carmen
+
+    paths = [out / f"intel_{i + 1}of{k}.clf.gz" for i in range(k)]
+    if not all(p.exists() for p in paths):
+        out.mkdir(parents=True, exist_ok=True)
+        scans = intel_reference_scans()
+        for p, part in zip(paths, np.array_split(np.arange(len(scans)), k), strict=True):
+            write_carmen(p, [scans[i] for i in part])
+    return paths
+
+
 def _prepare(name: str, out: Path):
     """(map yaml, gt tum, initial pose) for one log, cached in ``out``."""
     from gatmo.datasets.open import open_log
@@ -85,6 +127,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--logs", default="intel,aces,mit-csail")
     ap.add_argument("--max-scans", type=int, default=None)
+    ap.add_argument("--split", type=int, default=1,
+                    help="intel only: cut the log into this many runs in time, the object map "
+                    "carried from run to run (results under <log>-split<K>)")
     ap.add_argument("--demo-config", action="store_true",
                     help="the demo's likelihood_field_prob (sigma_hit 0.1 m) instead; results "
                     "under <log>-demo")
@@ -104,14 +149,23 @@ def main(argv=None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         map_yaml, gt, pose0 = _prepare(name, out)
         cfg = with_overrides(real_log_config(demo_model=args.demo_config), args.set)
-        key = (f"{name}-demo" if args.demo_config else name) + args.tag
+        key = (f"{name}-demo" if args.demo_config else name) + (
+            f"-split{args.split}" if args.split > 1 else "") + args.tag
+        logs, gts = [DATA / "slam-benchmark" / f"{name}.sort.bag"], [gt]
+        if args.split > 1:
+            if name != "intel":
+                raise SystemExit("--split needs reference poses along the log: intel only")
+            # each run starts at its first scan's reference pose (in the log), scored against
+            # the corrected poses as the whole log is
+            logs, pose0 = split_log(args.split, out / f"split{args.split}"), None
+            gts = [gt] * len(logs)
         out = OUT / key
-        res = compare(map_yaml, [DATA / "slam-benchmark" / f"{name}.sort.bag"], out / "cmp",
-                      initial_pose=pose0, gt_paths=[gt],
+        res = compare(map_yaml, logs, out / "cmp", initial_pose=pose0, gt_paths=gts,
                       relations_path=DATA / "slam-benchmark" / f"{name}.relations",
                       max_scans=args.max_scans, pictures=True, config=cfg)
-        figures[key] = {r["side"]: {k: r.get(k) for k in KEYS} for r in res.rows
-                         if r.get("log") != "all"}
+        figures[key] = {f"{r['side']} {r['log']}" if len(logs) > 1 else r["side"]:
+                        {k: r.get(k) for k in KEYS} for r in res.rows
+                        if len(logs) > 1 or r.get("log") != "all"}
         for side, r in figures[key].items():
             print(key, side, {k: round(v, 3) if isinstance(v, float) else v
                                for k, v in r.items()}, flush=True)

@@ -58,31 +58,6 @@ def sightings(objects: dict, scans) -> dict:
     return out
 
 
-def reference_scans(open_log, corrected: Path) -> list:
-    """The bag's 13,631 scans with reference poses: the corrected log has one pose every 3 s
-    (its FLASER pose, read as odometry); between two, the nearest one carried by the bag's
-    wheel odometry (over at most 1.5 s, a centimetre or two)."""
-    from gatmo.geometry import compose, interpolate_poses, relative
-
-    ref = list(open_log(corrected, skip_bad=True))
-    ref_t = np.array([s.stamp_s for s in ref]) + INTEL_SHIFT_S
-    ref_pose = np.array([s.gt_pose_xytheta if s.gt_pose_xytheta is not None
-                         else s.odom_pose_xytheta for s in ref])
-    scans = list(open_log(DATA / "slam-benchmark" / "intel.sort.bag", skip_bad=True))
-    t = np.array([s.stamp_s for s in scans])
-    odom = np.array([s.odom_pose_xytheta for s in scans])
-    keep = (t >= ref_t[0]) & (t <= ref_t[-1])
-    odom_at_ref = interpolate_poses(t, odom, ref_t)
-    k = np.clip(np.searchsorted(ref_t, t), 1, len(ref_t) - 1)
-    k = np.where(np.abs(ref_t[k - 1] - t) <= np.abs(ref_t[k] - t), k - 1, k)
-    out = []
-    for i in np.flatnonzero(keep):
-        s = scans[i]
-        s.gt_pose_xytheta = compose(ref_pose[k[i]], relative(odom_at_ref[k[i]], odom[i]))
-        out.append(s)
-    return out
-
-
 def verdicts(stamps_s: np.ndarray, hits: np.ndarray, passes: np.ndarray) -> list[dict]:
     """The visits to one thing: start and end stamps [s], and there / gone / mixed."""
     from gatmo.datasets.metrics import visits
@@ -113,7 +88,7 @@ def main(argv=None) -> int:
         print(f"skipped: {run / 'objects.json'} not found; run "
               "`python -m benchmarks.bench_real_compare --logs intel --demo-config` first")
         return 0
-    from gatmo.datasets.open import open_log
+    from benchmarks.bench_real_compare import intel_reference_scans
     from gatmo.maps.object_io import load_objects
 
     omap = load_objects(run / "objects.json")
@@ -129,7 +104,7 @@ def main(argv=None) -> int:
     group = {**{k: "map" for k in control}, **{k: "Gamma" for k in gamma},
              **{k: "added" for k in added}}
     things = {k: omap.by_id[k].cells_world() for k in sorted(group)}
-    scans = reference_scans(open_log, corrected)
+    scans = intel_reference_scans()
     stamps = np.array([s.stamp_s for s in scans]) - INTEL_SHIFT_S
     seen = sightings(things, scans)
     rows = []
