@@ -8,8 +8,9 @@ object GATMO added at the end of the run (and, for contrast, every thing it trac
 did not add: Gamma), this replays the log at the *reference* poses (the gmapping-corrected log,
 independent of the stack under test) and counts, scan by scan, the beams ending on the thing's
 cells and the beams passing through them (``gatmo.datasets.metrics.object_sightings``). Scans
-that see it are grouped into visits (``visits``, gaps over 30 s); a visit is *there* when most
-of its scans see the thing, *gone* when most see through it.
+that see it are grouped into visits (``visits``, gaps over 30 s); a visit is *there* when its
+scans that see the thing outnumber those that see through it two to one, *gone* the other way
+round, else mixed.
 
     python -m benchmarks.bench_real_compare --logs intel --demo-config   # writes the run
     python -m benchmarks.bench_real_objects [--run bench-out/real_compare/intel-demo/cmp]
@@ -25,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+from benchmarks.bench_real_compare import DATA, INTEL_SHIFT_S
+
 OUT = Path("bench-out")
-INTEL_SHIFT_S = 976052857.33753  # intel timestamps = corrected timestamps + this
 MIN_BEAMS = 3  # beams on (or through) a thing for a scan to count as seeing it (or not)
 SIGHT_M = 8.0  # farther, a 1 deg beam spacing is wider than a chair
 # the tracked outlines come from the stack's poses (0.1 m off at times), the rays from the
