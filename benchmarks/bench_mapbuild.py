@@ -48,6 +48,7 @@ def _vs_gmapping(t, poses, rel) -> dict | None:
     from gatmo.datasets.metrics import relations_error
     from gatmo.datasets.open import open_log
     from gatmo.datasets.relations import Relations
+    from gatmo.geometry import nearest_index
 
     path = DATA.parent / "radish-corrected" / "intel-corrected.log.gz"
     if not path.exists():
@@ -58,8 +59,7 @@ def _vs_gmapping(t, poses, rel) -> dict | None:
     rp = np.array([s.gt_pose_xytheta for s in ref])
 
     def covered(q):
-        i = np.clip(np.searchsorted(rt, q), 1, len(rt) - 1)
-        return np.minimum(np.abs(rt[i - 1] - q), np.abs(rt[i] - q)) <= 0.002
+        return np.abs(rt[nearest_index(rt, q)] - q) <= 0.002
 
     m = covered(np.asarray(rel.t1_s)) & covered(np.asarray(rel.t2_s))
     sub = Relations(np.asarray(rel.t1_s)[m], np.asarray(rel.t2_s)[m],

@@ -60,7 +60,7 @@ def intel_reference_scans() -> list:
     (its FLASER pose, read as odometry); between two, the nearest one carried by the bag's
     wheel odometry (over at most 1.5 s, a centimetre or two)."""
     from gatmo.datasets.open import open_log
-    from gatmo.geometry import compose, interpolate_poses, relative
+    from gatmo.geometry import compose, interpolate_poses, nearest_index, relative
 
     corrected = DATA / "radish-corrected" / "intel-corrected.log.gz"
     ref = list(open_log(corrected, skip_bad=True))
@@ -72,8 +72,7 @@ def intel_reference_scans() -> list:
     odom = np.array([s.odom_pose_xytheta for s in scans])
     keep = (t >= ref_t[0]) & (t <= ref_t[-1])
     odom_at_ref = interpolate_poses(t, odom, ref_t)
-    k = np.clip(np.searchsorted(ref_t, t), 1, len(ref_t) - 1)
-    k = np.where(np.abs(ref_t[k - 1] - t) <= np.abs(ref_t[k] - t), k - 1, k)
+    k = nearest_index(ref_t, t)
     out = []
     for i in np.flatnonzero(keep):
         s = scans[i]

@@ -49,6 +49,27 @@ def transform_points(T_a_b: np.ndarray, points_b_xy: np.ndarray) -> np.ndarray:
     return np.asarray(points_b_xy, dtype=float) @ R.T + T_a_b[:2]
 
 
+def nearest_index(sorted_values: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Index (M,) into ``sorted_values`` (N >= 2, ascending) of the value nearest each of
+    ``query`` (M,); a tie goes to the lower index."""
+    v = np.asarray(sorted_values, dtype=float)
+    q = np.asarray(query, dtype=float)
+    i = np.clip(np.searchsorted(v, q), 1, len(v) - 1)
+    return np.where(np.abs(v[i - 1] - q) <= np.abs(v[i] - q), i - 1, i)
+
+
+def points_to_beams(points_xy: np.ndarray, laser_pose_xytheta: np.ndarray,
+                    angles_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where points (K, 2) of the map frame lie for a laser at ``laser_pose_xytheta`` (3,) with
+    beams at ``angles_rad`` (B,, ascending, laser frame): (range_m (K,), bearing_rad (K,) in
+    the laser frame, index (K,) of the beam nearest that bearing)."""
+    lp = np.asarray(laser_pose_xytheta, dtype=float)
+    d = np.asarray(points_xy, dtype=float) - lp[:2]
+    rng = np.hypot(d[:, 0], d[:, 1])
+    bearing = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - lp[2])
+    return rng, bearing, nearest_index(angles_rad, bearing)
+
+
 def interpolate_poses(stamps_s: np.ndarray, poses_xytheta: np.ndarray, query_s: np.ndarray):
     """Linearly interpolate poses (N, 3) at ``query_s`` (M,), angles along the short arc.
 

@@ -61,3 +61,18 @@ def test_path_length():
     p = np.array([[0, 0, 0], [3, 4, 0], [3, 5, 1.0]])
     assert path_length_m(p) == 6.0
     assert path_length_m(p[:1]) == 0.0
+
+
+def test_nearest_index_and_points_to_beams():
+    from gatmo.geometry import nearest_index, points_to_beams
+
+    v = np.array([0.0, 1.0, 2.0, 4.0])
+    q = np.array([-1.0, 0.4, 0.5, 2.9, 3.1, 9.0])
+    assert nearest_index(v, q).tolist() == [0, 0, 0, 2, 3, 3]
+    angles = np.radians(np.arange(-90.0, 91.0, 1.0))
+    # a laser at (1, 1) facing +y: a point 2 m ahead is on beam 0 deg, one 1 m to its left at 90
+    pts = np.array([[1.0, 3.0], [0.0, 1.0]])
+    rng, bearing, j = points_to_beams(pts, np.array([1.0, 1.0, np.pi / 2]), angles)
+    np.testing.assert_allclose(rng, [2.0, 1.0])
+    np.testing.assert_allclose(bearing, [0.0, np.pi / 2], atol=1e-12)
+    assert j.tolist() == [90, 180]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gatmo.geometry import interpolate_poses, relative, wrap_angle
+from gatmo.geometry import interpolate_poses, nearest_index, points_to_beams, relative, wrap_angle
 
 
 def ate(
@@ -57,8 +57,7 @@ def relations_error(stamps_s, poses_xytheta, relations, *, max_dt_s: float = 0.0
     t, p = t[order], p[order]
 
     def nearest(q):
-        i = np.clip(np.searchsorted(t, q), 1, len(t) - 1)
-        j = np.where(np.abs(t[i - 1] - q) <= np.abs(t[i] - q), i - 1, i)
+        j = nearest_index(t, q)
         return j, np.abs(t[j] - q)
 
     i1, d1 = nearest(np.asarray(relations.t1_s))
@@ -105,19 +104,10 @@ def object_sightings(
     *passes* when it is not a hit and ends (or, invalid, returns nothing) more than
     ``pass_margin_m`` beyond its nearest cell: something stood there, or nothing did.
     """
-    cells = np.asarray(cells_xy, dtype=float)
-    x, y, th = (float(v) for v in laser_pose_xytheta)
-    d = cells - (x, y)
-    r_c = np.hypot(d[:, 0], d[:, 1])
-    b_c = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - th)
     angles = np.asarray(angles_rad, dtype=float)
-    near = (r_c < max_range_m) & (b_c >= angles[0] - 1e-9) & (b_c <= angles[-1] + 1e-9)
-    if not near.any():
-        return 0, 0
-    r_c, b_c = r_c[near], b_c[near]
-    j = np.clip(np.searchsorted(angles, b_c), 1, len(angles) - 1)
-    j = np.where(np.abs(angles[j - 1] - b_c) <= np.abs(angles[j] - b_c), j - 1, j)
-    on = r_c * np.abs(b_c - angles[j]) <= 0.5 * np.sqrt(2.0) * cell_m
+    r_c, b_c, j = points_to_beams(cells_xy, laser_pose_xytheta, angles)
+    on = ((r_c < max_range_m) & (b_c >= angles[0] - 1e-9) & (b_c <= angles[-1] + 1e-9)
+          & (r_c * np.abs(b_c - angles[j]) <= 0.5 * np.sqrt(2.0) * cell_m))
     if not on.any():
         return 0, 0
     j, r_c = j[on], r_c[on]

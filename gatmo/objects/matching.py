@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from gatmo.geometry import wrap_angle
+from gatmo.geometry import points_to_beams, wrap_angle
 from gatmo.objects.objectmap import MapObject
 
 
@@ -217,15 +217,13 @@ def beam_consistency(obj: MapObject, pose_xytheta: np.ndarray, views: list,
     pts = obj.cells_world(pose_xytheta, dense=True)
     support = contradict = 0
     for lp, angles, ranges, reach in views:
-        d = pts - lp[:2]
-        rk = np.hypot(d[:, 0], d[:, 1])
-        near = rk <= reach
-        if not near.any() or len(angles) < 2:
+        if len(angles) < 2:
             continue
-        rk = rk[near]
-        bk = wrap_angle(np.arctan2(d[near, 1], d[near, 0]) - lp[2])
-        j = np.clip(np.searchsorted(angles, bk), 1, len(angles) - 1)
-        j = np.where(np.abs(angles[j - 1] - bk) < np.abs(angles[j] - bk), j - 1, j)
+        rk, bk, j = points_to_beams(pts, lp, angles)
+        near = rk <= reach
+        if not near.any():
+            continue
+        rk, bk, j = rk[near], bk[near], j[near]
         half = 0.5 * np.abs(np.diff(angles)).mean() + 0.5 * obj.resolution_m / rk
         ok = np.abs(angles[j] - bk) <= half
         if not ok.any():
