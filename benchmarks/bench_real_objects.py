@@ -10,7 +10,9 @@ independent of the stack under test) and counts, scan by scan, the beams ending 
 cells and the beams passing through them (``gatmo.datasets.metrics.object_sightings``). Scans
 that see it are grouped into visits (``visits``, gaps over 30 s); a visit is *there* when its
 scans that see the thing outnumber those that see through it two to one, *gone* the other way
-round, else mixed.
+round, else mixed. The map GATMO leaves should hold what stands at the end of the log, so the
+last visit of 5 scans or more is reported too: a chair that arrived late and stood there at
+the end is rightly added, one that left again is not.
 
     python -m benchmarks.bench_real_compare --logs intel --demo-config   # writes the run
     python -m benchmarks.bench_real_objects [--run bench-out/real_compare/intel-demo/cmp]
@@ -36,6 +38,7 @@ SIGHT_M = 8.0  # farther, a 1 deg beam spacing is wider than a chair
 # the outline's nearest cell passes through
 HIT_TOL_M = 0.25
 PASS_MARGIN_M = 0.4
+LAST_MIN_SCANS = 5  # a visit of fewer scans does not decide the state at the end
 MAP_CELLS = (10, 100)  # the control's size range, cells (a chair is 10-60)
 
 
@@ -113,13 +116,16 @@ def main(argv=None) -> int:
         v = verdicts(stamps, h, p)
         there = [x for x in v if x["kind"] == "there"]
         span = there[-1]["t1_s"] - there[0]["t0_s"] if there else 0.0
+        # the map at the end of the run should hold what stands at the end of the log
+        last = [x["kind"] for x in v if x["scans_there"] + x["scans_gone"] >= LAST_MIN_SCANS]
         rows.append(dict(
             id=k, group=group[k], centre_xy=np.round(things[k].mean(axis=0), 2).tolist(),
             tracked_at_s=round(first_seen.get(k, float("nan")) - stamps[0], 1),
             visits=len(v), there=len(there), gone=sum(x["kind"] == "gone" for x in v),
             mixed=sum(x["kind"] == "mixed" for x in v), there_span_s=round(span, 1),
             # seen standing there on two visits a minute or more apart
-            persistent=bool(len(there) >= 2 and span >= 60.0), visit_list=v))
+            persistent=bool(len(there) >= 2 and span >= 60.0),
+            last_visit=last[-1] if last else None, visit_list=v))
     summary = {}
     for g in ("added", "Gamma", "map"):
         sel = [r for r in rows if r["group"] == g and r["visits"] > 0]
@@ -129,16 +135,19 @@ def main(argv=None) -> int:
             there_of_visits=sum(r["there"] for r in sel) / max(n_v, 1),
             gone_of_visits=sum(r["gone"] for r in sel) / max(n_v, 1),
             persistent=sum(r["persistent"] for r in sel),
-            never_there=sum(r["there"] == 0 for r in sel))
+            never_there=sum(r["there"] == 0 for r in sel),
+            there_at_last_visit=sum(r["last_visit"] == "there" for r in sel),
+            gone_at_last_visit=sum(r["last_visit"] == "gone" for r in sel))
         m = summary[g]
         print(f"{g}: {m['objects']} seen on {n_v} visits; there on {m['there_of_visits']:.0%}, "
               f"gone on {m['gone_of_visits']:.0%} of them; {m['persistent']} there on visits "
-              f">= 60 s apart, {m['never_there']} never seen there")
+              f">= 60 s apart, {m['never_there']} never seen there; at the last visit there "
+              f"{m['there_at_last_visit']}, gone {m['gone_at_last_visit']}")
         if g != "map":
             for r in sel:
                 print(f"  {r['id']:4d} at {r['centre_xy']}: visits {r['visits']} (there "
                       f"{r['there']}, gone {r['gone']}, mixed {r['mixed']}), there over "
-                      f"{r['there_span_s']} s")
+                      f"{r['there_span_s']} s, last visit {r['last_visit']}")
     OUT.mkdir(exist_ok=True)
     (OUT / "real_objects.json").write_text(json.dumps({"summary": summary, "rows": rows},
                                                         indent=1))

@@ -213,5 +213,13 @@ class GatmoConfig(GatmoModel):
     add_gone_beyond_m: float = Field(
         0.25, gt=0, description="a ray counts as passing a cell for add_max_passed_fraction "
         "only if it ends this far beyond it")
+    add_gone_max_range_m: float = Field(
+        8.0, gt=0, description="rays count as passing a new object's cells for "
+        "add_max_passed_fraction up to this range, beyond absence_max_range_m: not adding a "
+        "thing is a milder error than marking one absent, and a robot often sees last, from "
+        "across the room, that a thing has gone again (on the Intel log mostly from 5-9 m)")
+    add_gone_min_agreement: float = Field(
+        0.7, ge=0, le=1, description="a scan whose pose agrees with the map on fewer beams "
+        "than absence_min_agreement still counts for add_max_passed_fraction from this on")
     add_min_free_fraction: float = Field(
         0.5, ge=0, le=1, description="of a new object's cells, free in the static map")

@@ -656,7 +656,12 @@ class GatmoMapper:
         c = self.cfg
         beams = self._beams
         if agreement < c.absence_min_agreement:
-            return  # a pose 0.2 m off sees through small objects
+            # a pose 0.2 m off sees through small objects; that a new object has gone again
+            # asks less of it (the Intel log: where chairs had been moved away the map's
+            # agreement fell to 0.76-0.88)
+            if sees_through and agreement >= c.add_gone_min_agreement:
+                self._mark_passed(lp, scan, pts, from_m=0.0)
+            return
         if not sees_through:
             # beyond the paper: a filter locked onto the wrong place is as confident as a
             # right one, and its pose fits the map well enough to pass the agreement test (it
@@ -679,6 +684,7 @@ class GatmoMapper:
             return
         if sees_through:
             self._mark_seen_through(lp, ends)
+            self._mark_passed(lp, scan, pts, from_m=c.absence_max_range_m)
         objs = self.object_map.objects
         hit_cells = g.world_to_cell(pts)
         okh = g.in_bounds(hit_cells)
@@ -742,6 +748,34 @@ class GatmoMapper:
             seen = self._seen.setdefault(o.id, set())
             seen.update(self._local[cells[m, 1], cells[m, 0]].tolist())
             self._rays[o.id] = self._rays.get(o.id, 0) + len(np.unique(ray[m]))
+
+    def _mark_passed(self, lp, scan: Scan, pts: np.ndarray, from_m: float) -> None:
+        """Rays reaching past ``from_m`` [m], up to add_gone_max_range_m: the cells they pass
+        beyond ``from_m`` - add_gone_beyond_m (:meth:`_mark_seen_through` counted the nearer
+        ones) are evidence that a new object has gone again, and of nothing else."""
+        c, g = self.cfg, self._grid
+        near_m, far_m = from_m, c.add_gone_max_range_m
+        if far_m <= near_m:
+            return
+        rng_ = np.hypot(*(pts - lp[:2]).T)
+        long_ = rng_ > near_m
+        ends = lp[:2] + (pts[long_] - lp[:2]) * np.minimum(1.0, far_m / rng_[long_])[:, None]
+        r = scan.ranges_m
+        with np.errstate(invalid="ignore"):
+            free = np.isfinite(r) & (r >= scan.range_max_m) & (r < 1e6)
+        free_r = min(scan.range_max_m, far_m)
+        if free_r > near_m and free.any():
+            a = lp[2] + scan.angles_rad[free]
+            ends = np.vstack([ends, lp[:2] + free_r * np.stack([np.cos(a), np.sin(a)], axis=1)])
+        if not len(ends):
+            return
+        cells, ray = traverse_rays(g, lp[:2], ends, exclude_end_m=c.absence_exclude_end_m)
+        if not len(cells):
+            return
+        xy = g.cell_to_world(cells)
+        keep = ((np.hypot(*(xy - lp[:2]).T) > near_m - c.add_gone_beyond_m)
+                & (np.hypot(*(xy - ends[ray]).T) > c.add_gone_beyond_m))
+        np.add.at(self._passed, (cells[keep, 1], cells[keep, 0]), 1)
 
     def _classify_beams(self, lp, scan):
         """Per beam: (owner of the cell the map expects it to end on: object index, STRUCTURE
