@@ -1052,6 +1052,21 @@ def test_a_still_chair_not_in_the_map_holds_the_localizer_while_the_run_lasts(pr
     np.testing.assert_array_equal(loc, m.grid().cells)
 
 
+def _one_run(m, scene, n_scans: int, max_range_m: float):
+    """Drive ``m`` through one run: ``scene(i)`` gives scan i's (true pose, boxes in a
+    12 x 6 m room); returns ({gamma object id: its xy}, {added object ids})."""
+    m.begin_run(1)
+    events = []
+    for i in range(n_scans):
+        pose, boxes = scene(i)
+        s = make_scan(room_grid(12, 6, 0.05, boxes=boxes), pose, n_beams=361,
+                      fov_rad=2 * np.pi, max_range_m=max_range_m, stamp_s=0.1 * i)
+        events += m.update(pose, s, pose_confident=True, stamp_s=0.1 * i)
+    events += m.end_run()
+    seen = {e.object_id: np.array(e.pose_new[:2]) for e in events if e.kind == "gamma"}
+    return seen, {e.object_id for e in events if e.kind == "added"}
+
+
 @pytest.mark.parametrize(("gone_range_m", "n_added"), [(8.0, 1), (5.0, 2)])
 def test_a_thing_seen_gone_again_from_across_the_room_is_not_added(gone_range_m, n_added):
     """A 0.6 m box stands 3-5 m in front of a robot backing away, and is gone once the robot
@@ -1060,21 +1075,15 @@ def test_a_thing_seen_gone_again_from_across_the_room_is_not_added(gone_range_m,
     the end of the run; counted up to 5 m only, as absence is, it is added (the Intel log's
     chairs moved away and people who stood a while). A box standing all run is added either
     way."""
-    m = GatmoMapper.from_config(CFG.model_copy(update={"add_gone_max_range_m": gone_range_m}),
-                                room_grid(12, 6, 0.05))
-    m.begin_run(1)
-    events = []
-    for i in range(140):
-        t = 0.1 * i
+
+    def scene(i):
         pose = np.array([4.5 - 0.025 * i, 3.0, 0.0])
         left = np.hypot(*(pose[:2] - [7.7, 3.0])) > 5.05
-        boxes = [(2.0, 1.5, 2.4, 1.9)] + ([] if left else [(7.4, 2.7, 8.0, 3.3)])
-        world = room_grid(12, 6, 0.05, boxes=boxes)
-        s = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=10.0, stamp_s=t)
-        events += m.update(pose, s, pose_confident=True, stamp_s=t)
-    events += m.end_run()
-    seen = {e.object_id: np.array(e.pose_new[:2]) for e in events if e.kind == "gamma"}
-    added = {e.object_id for e in events if e.kind == "added"}
+        return pose, [(2.0, 1.5, 2.4, 1.9)] + ([] if left else [(7.4, 2.7, 8.0, 3.3)])
+
+    m = GatmoMapper.from_config(CFG.model_copy(update={"add_gone_max_range_m": gone_range_m}),
+                                room_grid(12, 6, 0.05))
+    seen, added = _one_run(m, scene, 140, max_range_m=10.0)
     assert len(seen) == 2 and len(added) == n_added
     assert any(np.hypot(*(seen[k] - [2.2, 1.7])) < 0.3 for k in added)  # the box that stayed
     assert m.counts["gamma_gone"] == 2 - n_added
@@ -1087,21 +1096,15 @@ def test_a_thing_gone_again_where_the_map_agrees_less_is_not_added(min_agreement
     is inferred from them. A box that stood for 4 s and left is still kept out of the map at
     the end of the run, since add_gone_min_agreement (0.7) lets those scans show it gone
     again; at 0.85 it is added. A box standing all run is added either way."""
-    grid = room_grid(10, 6, 0.05, boxes=[(6.4, 0.0, 6.5, 6.0)])
+
+    def scene(i):
+        boxes = [(5.0, 4.6, 5.5, 5.1)] + ([(3.8, 1.8, 4.2, 2.2)] if i < 40 else [])
+        return np.array([1.5 + 0.02 * i, 3.5, -0.3]), boxes
+
+    grid = room_grid(12, 6, 0.05, boxes=[(6.4, 0.0, 6.5, 6.0)])
     m = GatmoMapper.from_config(CFG.model_copy(update={"add_gone_min_agreement": min_agreement}),
                                 grid)
-    m.begin_run(1)
-    events = []
-    for i in range(120):
-        t = 0.1 * i
-        boxes = [(5.0, 4.6, 5.5, 5.1)] + ([(3.8, 1.8, 4.2, 2.2)] if t < 4.0 else [])
-        world = room_grid(10, 6, 0.05, boxes=boxes)
-        pose = np.array([1.5 + 0.02 * i, 3.5, -0.3])
-        s = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0, stamp_s=t)
-        events += m.update(pose, s, pose_confident=True, stamp_s=t)
-    events += m.end_run()
-    seen = {e.object_id: np.array(e.pose_new[:2]) for e in events if e.kind == "gamma"}
-    added = {e.object_id for e in events if e.kind == "added"}
+    seen, added = _one_run(m, scene, 120, max_range_m=6.0)
     assert len(seen) == 2 and len(added) == n_added
     assert any(np.hypot(*(seen[k] - [5.25, 4.85])) < 0.3 for k in added)  # the box that stayed
     assert m.counts["gamma_gone"] == 2 - n_added
