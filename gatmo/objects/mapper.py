@@ -668,18 +668,8 @@ class GatmoMapper:
             # converged there because the scan fits); absences from such poses emptied the
             # map of pieces that stood where they were
             beams = (beams[0], beams[1], np.zeros_like(beams[2]), *beams[3:])
-        r = scan.ranges_m
-        with np.errstate(invalid="ignore"):
-            far = np.isfinite(r) & (r >= scan.range_max_m) & (r < 1e6)
-        far_r = np.minimum(scan.range_max_m, c.absence_max_range_m)
-        a = lp[2] + scan.angles_rad[far]
-        far_pts = lp[:2] + far_r * np.stack([np.cos(a), np.sin(a)], axis=1)
         # returns farther than absence_max_range_m count as free space up to that range
-        rng_ = np.hypot(*(pts - lp[:2]).T)
-        scale = np.minimum(1.0, c.absence_max_range_m / np.maximum(rng_, 1e-9))
-        ends = lp[:2] + (pts - lp[:2]) * scale[:, None]
-        if len(far_pts):
-            ends = np.vstack([ends, far_pts])
+        ends = _ray_ends(lp, scan, pts, c.absence_max_range_m)
         if len(ends) == 0:
             return
         if sees_through:
@@ -754,26 +744,16 @@ class GatmoMapper:
         beyond ``from_m`` - add_gone_beyond_m (:meth:`_mark_seen_through` counted the nearer
         ones) are evidence that a new object has gone again, and of nothing else."""
         c, g = self.cfg, self._grid
-        near_m, far_m = from_m, c.add_gone_max_range_m
-        if far_m <= near_m:
+        if c.add_gone_max_range_m <= from_m:
             return
-        rng_ = np.hypot(*(pts - lp[:2]).T)
-        long_ = rng_ > near_m
-        ends = lp[:2] + (pts[long_] - lp[:2]) * np.minimum(1.0, far_m / rng_[long_])[:, None]
-        r = scan.ranges_m
-        with np.errstate(invalid="ignore"):
-            free = np.isfinite(r) & (r >= scan.range_max_m) & (r < 1e6)
-        free_r = min(scan.range_max_m, far_m)
-        if free_r > near_m and free.any():
-            a = lp[2] + scan.angles_rad[free]
-            ends = np.vstack([ends, lp[:2] + free_r * np.stack([np.cos(a), np.sin(a)], axis=1)])
+        ends = _ray_ends(lp, scan, pts, c.add_gone_max_range_m, longer_than_m=from_m)
         if not len(ends):
             return
         cells, ray = traverse_rays(g, lp[:2], ends, exclude_end_m=c.absence_exclude_end_m)
         if not len(cells):
             return
         xy = g.cell_to_world(cells)
-        keep = ((np.hypot(*(xy - lp[:2]).T) > near_m - c.add_gone_beyond_m)
+        keep = ((np.hypot(*(xy - lp[:2]).T) > from_m - c.add_gone_beyond_m)
                 & (np.hypot(*(xy - ends[ray]).T) > c.add_gone_beyond_m))
         np.add.at(self._passed, (cells[keep, 1], cells[keep, 0]), 1)
 
@@ -1363,6 +1343,25 @@ class GatmoMapper:
         d["metaobjects"] = len(self._meta)
         d["ms_per_update"] = float(np.median(self._ms)) if self._ms else float("nan")
         return d
+
+
+def _ray_ends(lp, scan: Scan, pts: np.ndarray, cap_m: float,
+              longer_than_m: float = 0.0) -> np.ndarray:
+    """(R, 2) where the rays of a scan from the laser at ``lp`` end, map frame [m]: first the
+    returns ``pts`` (N, 2), then the beams that returned nothing (at the laser's max range),
+    each cut at ``cap_m``; only rays reaching farther than ``longer_than_m``."""
+    rng_ = np.hypot(*(pts - lp[:2]).T)
+    long_ = rng_ > longer_than_m
+    scale = np.minimum(1.0, cap_m / np.maximum(rng_[long_], 1e-9))
+    ends = lp[:2] + (pts[long_] - lp[:2]) * scale[:, None]
+    r = scan.ranges_m
+    with np.errstate(invalid="ignore"):
+        none = np.isfinite(r) & (r >= scan.range_max_m) & (r < 1e6)
+    none_r = min(scan.range_max_m, cap_m)
+    if none_r > longer_than_m and none.any():
+        a = lp[2] + scan.angles_rad[none]
+        ends = np.vstack([ends, lp[:2] + none_r * np.stack([np.cos(a), np.sin(a)], axis=1)])
+    return ends
 
 
 def _inner_cells(o: MapObject) -> np.ndarray:
