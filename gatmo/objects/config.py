@@ -97,6 +97,11 @@ class GatmoConfig(GatmoModel):
         "landmarks: over 50 held-out hall seeds, against 0.8 without them, found +2.5 points, "
         "false relocations -0.12 per run, ATE unchanged (docs/experiments.md)")
     match_patience_scans: int = Field(30, ge=1, description="after this, match despite doubt")
+    match_shift_unseen: bool = Field(
+        True, description="a placed object whose place was not seen this run, neither standing "
+        "there nor seen through (not in doubt), may be shifted (up to doubt_search_m) onto a "
+        "chair near it; off: only objects in doubt are shifted (and movable ones back to an "
+        "earlier pose, prior_earlier_poses)")
     match_unseen_movable: bool = Field(
         False, description="the paper's matching of chairs with movable objects whose place "
         "was not seen this run (after match_patience_scans); off: a piece not visited yet is "

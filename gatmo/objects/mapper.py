@@ -945,7 +945,8 @@ class GatmoMapper:
     def _candidates(self, pts: np.ndarray) -> list[tuple[int, MapObject]]:
         """(tier, object) pairs a chair may be: absent ones (paper) and placed ones near it in
         doubt, tier 0; placed ones near it not yet seen at their place this run, tier 1 (a
-        shift: only a match near their pose counts, then as tier 0); movable ones elsewhere
+        shift: only a match near their pose counts, then as tier 0; with
+        ``match_shift_unseen``); movable ones elsewhere
         not seen at their place this run (paper: A and M), tier -1; with
         ``prior_earlier_poses``, movable ones elsewhere not seen at their place this run that
         stood near the chair before, tier -2 (only a match at an earlier pose counts, then as
@@ -962,8 +963,9 @@ class GatmoMapper:
                 continue
             confirmed = self._confirmed(o)
             near = np.hypot(*(o.pose_xytheta[:2] - c)) < self.cfg.doubt_search_m + o.extent_m()
-            if near and not confirmed:
-                out.append((0 if o.id in self._doubt else 1, o))
+            doubted = o.id in self._doubt
+            if near and not confirmed and (doubted or self.cfg.match_shift_unseen):
+                out.append((0 if doubted else 1, o))
             elif o.status == "M" and not confirmed and self.cfg.match_unseen_movable:
                 out.append((-1, o))
             elif o.status == "M" and not confirmed and self.cfg.prior_earlier_poses:

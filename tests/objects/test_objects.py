@@ -1108,3 +1108,27 @@ def test_a_thing_gone_again_where_the_map_agrees_less_is_not_added(min_agreement
     assert len(seen) == 2 and len(added) == n_added
     assert any(np.hypot(*(seen[k] - [5.25, 4.85])) < 0.3 for k in added)  # the box that stayed
     assert m.counts["gamma_gone"] == 2 - n_added
+
+
+@pytest.mark.parametrize(("shift_unseen", "relocated"), [(True, True), (False, False)])
+def test_a_piece_whose_place_no_beam_reached_is_not_shifted_onto_a_look_alike(shift_unseen,
+                                                                             relocated):
+    # the map's box still stands, past the laser's range, and an identical box the map lacks
+    # stands 1.3 m nearer the robot: no beam reaches the map's box, so nothing says it has
+    # moved. Shifting it onto the box in front (match_shift_unseen) leaves the one behind out
+    # of the map, as on the Intel log cut in two runs, where a corner piece not seen yet was
+    # turned and moved 0.9 m onto a look-alike, and, still standing, was added again at the
+    # end of the run
+    m, box, world = _one_object((10, 6), (1.0, 2.5, 1.5, 3.0),
+                                [(1.0, 2.5, 1.5, 3.0), (2.3, 2.5, 2.8, 3.0)],
+                                match_shift_unseen=shift_unseen)
+    path = [(5.7, y, np.pi) for y in np.linspace(1.2, 4.3, 50)]
+    events = _drive(m, world, path, max_range_m=4.0, n_beams=181)
+    kinds = [(e.kind, e.object_id) for e in events]
+    assert (("relocated", box.id) in kinds) == relocated
+    if relocated:
+        assert np.hypot(*(box.pose_xytheta[:2] - [2.55, 2.75])) < 0.1
+    else:
+        assert m._rays.get(box.id, 0) == 0 and box.id not in m._doubt  # no beam reached it
+        assert np.allclose(box.pose_xytheta, box.base_pose_xytheta)
+        assert [x.dominant() for x in m._meta] == ["chair"]  # the front box: added at the end
