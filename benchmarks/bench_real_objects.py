@@ -14,6 +14,10 @@ round, else mixed. The map GATMO leaves should hold what stands at the end of th
 last visit of 5 scans or more is reported too: a chair that arrived late and stood there at
 the end is rightly added, one that left again is not.
 
+Relocations are checked the same way: for every object GATMO relocated, the scans after the
+relocation that saw its old footprint and its new one, there or gone. A relocation of a thing
+that still stands at its old place afterwards moved the map's copy away from it.
+
     python -m benchmarks.bench_real_compare --logs intel --demo-config   # writes the run
     python -m benchmarks.bench_real_objects [--run bench-out/real_compare/intel-demo/cmp]
 
@@ -76,6 +80,41 @@ def verdicts(stamps_s: np.ndarray, hits: np.ndarray, passes: np.ndarray) -> list
         out.append(dict(t0_s=float(stamps_s[a]), t1_s=float(stamps_s[b]), scans_there=n_there,
                         scans_gone=n_gone, kind=kind))
     return out
+
+
+def after(stamps_s: np.ndarray, t_s: float, hits: np.ndarray, passes: np.ndarray) -> dict:
+    """Scans after ``t_s`` [s] that saw a footprint there / gone (the rules of
+    :func:`verdicts`)."""
+    late = stamps_s > t_s
+    there = (hits >= MIN_BEAMS) & (hits >= passes) & late
+    gone = (passes >= MIN_BEAMS) & (hits == 0) & late
+    return {"there": int(there.sum()), "gone": int(gone.sum())}
+
+
+def relocation_rows(omap, events: list[dict], scans, stamps_s: np.ndarray) -> list[dict]:
+    """Per relocation event: how far it moved the object, and the scans after it that saw its
+    old and its new footprint there or gone (reference poses)."""
+    moves = [e for e in events if e["kind"] == "relocated"]
+    feet = {}
+    for k, e in enumerate(moves):
+        o = omap.by_id[e["object_id"]]
+        feet[(k, "old")] = o.cells_world(np.asarray(e["pose_old"], dtype=float))
+        feet[(k, "new")] = o.cells_world(np.asarray(e["pose_new"], dtype=float))
+    seen = sightings(feet, scans)
+    rows = []
+    for k, e in enumerate(moves):
+        t_s = e["stamp_s"] - INTEL_SHIFT_S
+        old, new = after(stamps_s, t_s, *seen[(k, "old")]), after(stamps_s, t_s, *seen[(k, "new")])
+        moved_m = float(np.hypot(*np.subtract(e["pose_new"][:2], e["pose_old"][:2])))
+        rows.append(dict(
+            id=e["object_id"], run=e["run"], at_s=round(float(t_s - stamps_s[0]), 1),
+            moved_m=round(moved_m, 2),
+            old_after=old, new_after=new,
+            # still standing where it was: the relocation moved the map's copy off it (a move
+            # within twice the hit tolerance leaves the two footprints indistinguishable)
+            stood_at_old=bool(moved_m > 2 * HIT_TOL_M and old["there"] >= MIN_BEAMS
+                              and old["there"] >= 2 * old["gone"])))
+    return rows
 
 
 def main(argv=None) -> int:
@@ -148,9 +187,16 @@ def main(argv=None) -> int:
                 print(f"  {r['id']:4d} at {r['centre_xy']}: visits {r['visits']} (there "
                       f"{r['there']}, gone {r['gone']}, mixed {r['mixed']}), there over "
                       f"{r['there_span_s']} s, last visit {r['last_visit']}")
+    moves = relocation_rows(omap, events, scans, stamps)
+    print(f"relocated: {len(moves)}")
+    for r in moves:
+        o, n = r["old_after"], r["new_after"]
+        print(f"  {r['id']:4d} at {r['at_s']} s by {r['moved_m']} m; scans after it: old place "
+              f"there {o['there']}, gone {o['gone']}; new place there {n['there']}, gone "
+              f"{n['gone']}{'; still stood at its old place' if r['stood_at_old'] else ''}")
     OUT.mkdir(exist_ok=True)
-    (OUT / "real_objects.json").write_text(json.dumps({"summary": summary, "rows": rows},
-                                                        indent=1))
+    (OUT / "real_objects.json").write_text(json.dumps(
+        {"summary": summary, "rows": rows, "relocations": moves}, indent=1))
     return 0
 
 
