@@ -66,12 +66,17 @@ def sightings(objects: dict, scans) -> dict:
     return out
 
 
+def there_gone(hits: np.ndarray, passes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per scan (N,) bool: it saw the thing there (beams ending on it, at least as many as
+    passing through), and it saw it gone (beams passing through, none ending on it)."""
+    return (hits >= MIN_BEAMS) & (hits >= passes), (passes >= MIN_BEAMS) & (hits == 0)
+
+
 def verdicts(stamps_s: np.ndarray, hits: np.ndarray, passes: np.ndarray) -> list[dict]:
     """The visits to one thing: start and end stamps [s], and there / gone / mixed."""
     from gatmo.datasets.metrics import visits
 
-    there = (hits >= MIN_BEAMS) & (hits >= passes)
-    gone = (passes >= MIN_BEAMS) & (hits == 0)
+    there, gone = there_gone(hits, passes)
     out = []
     for a, b in visits(stamps_s, there | gone):
         n_there, n_gone = int(there[a:b + 1].sum()), int(gone[a:b + 1].sum())
@@ -83,12 +88,10 @@ def verdicts(stamps_s: np.ndarray, hits: np.ndarray, passes: np.ndarray) -> list
 
 
 def after(stamps_s: np.ndarray, t_s: float, hits: np.ndarray, passes: np.ndarray) -> dict:
-    """Scans after ``t_s`` [s] that saw a footprint there / gone (the rules of
-    :func:`verdicts`)."""
+    """Scans after ``t_s`` [s] that saw a footprint there / gone (:func:`there_gone`)."""
     late = stamps_s > t_s
-    there = (hits >= MIN_BEAMS) & (hits >= passes) & late
-    gone = (passes >= MIN_BEAMS) & (hits == 0) & late
-    return {"there": int(there.sum()), "gone": int(gone.sum())}
+    there, gone = there_gone(hits, passes)
+    return {"there": int((there & late).sum()), "gone": int((gone & late).sum())}
 
 
 def relocation_rows(omap, events: list[dict], scans, stamps_s: np.ndarray) -> list[dict]:
