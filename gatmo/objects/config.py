@@ -211,6 +211,9 @@ class GatmoConfig(GatmoModel):
         "provisional landmark")
     provisional_every_scans: int = Field(
         5, ge=1, description="GATMO updates between refreshes of the provisional landmarks")
+    provisional_near_m: float = Field(
+        0.15, gt=0, description="returns this close to a provisional landmark's cells are "
+        "explained by it (no longer withheld from the localizer)")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
     add_max_passed_fraction: float = Field(

@@ -262,7 +262,7 @@ class GatmoMapper:
         cells = cells[g.in_bounds(cells)]
         mask = np.zeros(g.cells.shape, dtype=bool)
         mask[cells[:, 1], cells[:, 0]] = True
-        r = int(np.ceil(c.delta_W_m / g.resolution_m))
+        r = int(np.ceil(c.provisional_near_m / g.resolution_m))
         yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
         self._prov_near = ndimage.binary_dilation(mask, structure=xx**2 + yy**2 <= r * r)
         return mask

@@ -1052,6 +1052,38 @@ def test_a_still_chair_not_in_the_map_holds_the_localizer_while_the_run_lasts(pr
     np.testing.assert_array_equal(loc, m.grid().cells)
 
 
+@pytest.mark.parametrize("near_m", [0.15, 0.05])
+def test_returns_beyond_a_partial_provisional_outline_stay_withheld(near_m):
+    """A 2 m bench the map lacks, 1 m in front of the robot, first seen with a 2 m laser:
+    only the first metre of its face lies within the tracked reach and becomes a provisional
+    landmark. Scans with a longer reach then see the rest of the face (they feed no track, so
+    the outline does not grow). A return 0.1 m past the outline's end, on the same face, has
+    no cell of the localizer's map under it: with ``provisional_near_m`` 0.15 m it is
+    explained by the outline and reaches the localizer, whose likelihood field pulls it onto
+    the outline's end, along the face (on hall seed 410 that slid the filter 0.15 m along a
+    new desk, then turned it 30 deg); with 0.05 m it stays withheld. A return on the outline
+    is explained either way."""
+    wall = (3.0, 1.3, 6.0, 1.4)  # in the map, behind the robot: what the pose tests see
+    grid = room_grid(10, 6, 0.05, boxes=[wall])
+    m = GatmoMapper.from_config(CFG.model_copy(update={"provisional_near_m": near_m}), grid)
+    world = room_grid(10, 6, 0.05, boxes=[wall, (4.0, 3.0, 6.0, 3.3)])
+    m.begin_run(1)
+    for i in range(30):
+        pose = np.array([4.2 + 0.002 * i, 2.0, np.pi / 2])
+        far = i >= 20
+        s = make_scan(world, pose, n_beams=721, fov_rad=2 * np.pi,
+                      max_range_m=6.0 if far else 2.0, stamp_s=0.1 * i)
+        m.update(pose, s, pose_confident=True, stamp_s=0.1 * i, track=not far)
+    outline = m._provisional_mask()
+    assert outline is not None
+    xs = grid.cell_to_world(np.argwhere(outline)[:, ::-1])[:, 0]
+    assert 4.7 < xs.max() < 5.2  # the face's first metre, not the whole bench
+    past_end = np.array([[xs.max() + 0.1, 2.98]])
+    on_outline = np.array([[4.5, 2.98]])
+    assert not m.unexplained_at(on_outline)[0]
+    assert m.unexplained_at(past_end)[0] == (near_m < 0.1)
+
+
 def _one_run(m, scene, n_scans: int, max_range_m: float):
     """Drive ``m`` through one run: ``scene(i)`` gives scan i's (true pose, boxes in a
     12 x 6 m room); returns ({gamma object id: its xy}, {added object ids})."""
