@@ -49,6 +49,10 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
     rows = []
     for k, log in enumerate(scen.logs):
         scans = list(CarmenLog(log))
+        # the objects standing where no piece stands in this run's layout: what GATMO should
+        # notice gone in it (stale_why, below)
+        stale0 = map_census(mapper.object_map, ties, doc, k + 1)["stale_ids"]
+        seen0 = mapper.counts["seen_through_scans"]
         stack = LocalizationStack(
             make_localizer(cfg, mapper.grid(), k, scans[0].gt_pose_xytheta, False),
             make_matcher(cfg), mapper, cfg.fusion)
@@ -60,6 +64,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
             st = stack.step(s)
             err.append(np.hypot(*(st.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
             events += [e.as_dict() for e in st.events]
+        why = stale_why(mapper, stale0, scans, events)
         events += [e.as_dict() for e in stack.end_run()]
         score = score_run(mapper.object_map, ties, doc, k + 1, events)
         ms = (time.perf_counter() - t0) * 1e3 / len(scans)
@@ -85,9 +90,41 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
             "moved": score["moved"], "found": score["found"],
             "false_relocations": score["false_relocations"],
             "map_correct_fraction": score["map_correct_fraction"],
-            **map_census(om, ties, doc, k + 1),
+            **{key: v for key, v in map_census(om, ties, doc, k + 1).items()
+               if key != "stale_ids"},
+            "seen_through_scans": mapper.counts["seen_through_scans"] - seen0,
+            **why,
         })
     return rows
+
+
+def stale_why(mapper, stale_ids: list[int], scans, events: list[dict]) -> dict:
+    """Why the objects that were stale at a run's start (their piece not in the run's layout)
+    are or are not taken off the map in it, counted as ``stale_*``: ``absent`` (marked absent
+    this run), ``unseen`` (from the true poses no 3 scans saw through 30 % of its cells, or
+    under 30 % in all: nothing to notice), ``no_evidence`` (seen through from the true poses,
+    but GATMO counted no ray or beam through it: the scans it took from confirmed poses did
+    not reach it), ``partial`` (some evidence, short of the absence test). Read before
+    ``end_run``, which keeps the evidence for the next run only."""
+    from gatmo.pipeline.evaluate import seen_through
+
+    absent = {e["object_id"] for e in events if e["kind"] == "absent"}
+    out = {"stale_at_start": len(stale_ids), "stale_absent": 0, "stale_unseen": 0,
+           "stale_no_evidence": 0, "stale_partial": 0}
+    for oid in stale_ids:
+        o = mapper.object_map.by_id[oid]
+        if oid in absent:
+            out["stale_absent"] += 1
+            continue
+        union, n = seen_through(o.cells_world(), scans, mapper.cfg.absence_max_range_m)
+        ev = mapper.absence_evidence(oid)
+        if n < 3 or union.mean() < 0.3:
+            out["stale_unseen"] += 1
+        elif ev["rays"] == 0 and ev["beams_through"] == 0:
+            out["stale_no_evidence"] += 1
+        else:
+            out["stale_partial"] += 1
+    return out
 
 
 def summary(rows: list[dict], first: int = 10) -> dict:
@@ -112,6 +149,11 @@ def summary(rows: list[dict], first: int = 10) -> dict:
             "false_relocations": int(sum(r["false_relocations"] for r in sel)),
             "map_correct_fraction": float(np.mean([r["map_correct_fraction"] for r in sel])),
         }
+    out["stale_why_sum"] = {k: int(sum(r.get(k, 0) for r in rows))
+                            for k in ("stale_at_start", "stale_absent", "stale_unseen",
+                                      "stale_no_evidence", "stale_partial")}
+    out["seen_through_scans_mean"] = float(np.mean([r.get("seen_through_scans", 0)
+                                                    for r in rows]))
     from gatmo.pipeline.evaluate import CENSUS_KEYS
 
     for k in ("objects_placed", "pieces_in_world", "objects_total", "peak_rss_mb",

@@ -164,7 +164,7 @@ def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
     when it is tied to none and its footprint is still within ``near_m`` (mean distance) of
     where the static map drew it (a column), else
     ``stale`` (left where a piece stood, or made of nothing). ``pieces_unmapped``: pieces no
-    object stands on."""
+    object stands on; ``stale_ids``: the stale objects' ids."""
     res = scenario.get("resolution_m", 0.05)
     layout = scenario["runs"][run - 1]["objects"]
     trees = {p["id"]: cKDTree(transform_points(np.array(p["pose"], dtype=float),
@@ -172,6 +172,7 @@ def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
              for p in layout}
     on: dict[int, list[int]] = {}
     out = {"on_piece": 0, "duplicate": 0, "stale": 0, "fixed": 0}
+    stale_ids = []
     for o in object_map.placed():
         if o.structure:
             continue
@@ -191,12 +192,39 @@ def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
             out["fixed"] += 1
         else:
             out["stale"] += 1
+            stale_ids.append(o.id)
     for ids in on.values():
         out["on_piece"] += 1
         out["duplicate"] += len(ids) - 1
     out["pieces"] = len(layout)
     out["pieces_unmapped"] = len(layout) - len(on)
+    out["stale_ids"] = stale_ids
     return out
+
+
+def seen_through(points_xy: np.ndarray, scans, max_range_m: float,
+                 beyond_m: float = 0.2) -> tuple[np.ndarray, int]:
+    """How well the true poses saw through ``points_xy`` (N, 2, map frame): per point, whether
+    any scan's beam passed it by more than ``beyond_m`` within ``max_range_m`` of the laser
+    (N,) bool, and the number of scans that saw through at least 30 % of the points. Scans
+    carry ``gt_pose_xytheta`` and ``laser_pose_xytheta``; the beam nearest each point's
+    bearing stands for it."""
+    union = np.zeros(len(points_xy), dtype=bool)
+    n = 0
+    for s in scans:
+        lp = compose(np.asarray(s.gt_pose_xytheta, dtype=float), s.laser_pose_xytheta)
+        d = points_xy - lp[:2]
+        r = np.hypot(d[:, 0], d[:, 1])
+        b = (np.arctan2(d[:, 1], d[:, 0]) - lp[2] + np.pi) % (2 * np.pi) - np.pi
+        a = s.angles_rad
+        i = np.clip(np.searchsorted(a, b), 1, len(a) - 1)
+        i -= (b - a[i - 1]) < (a[i] - b)
+        inside = (b >= a[0]) & (b <= a[-1]) & (r <= max_range_m)
+        rng = np.nan_to_num(s.ranges_m[i], nan=0.0, posinf=0.0)
+        through = inside & (rng > r + beyond_m)
+        union |= through
+        n += int(through.mean() >= 0.3) if len(through) else 0
+    return union, n
 
 
 def expected_pose(o, piece_id: int, layout0: list[dict], layout: list[dict]):

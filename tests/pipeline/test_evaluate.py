@@ -125,4 +125,20 @@ def test_map_census_counts_duplicates_stale_objects_and_unmapped_pieces():
     scen = {"runs": [{"objects": layout}]}
     c = map_census(om, {1: 7, 3: 8, 4: 8, 6: 9}, scen, 1)
     assert c == {"on_piece": 2, "duplicate": 1, "stale": 2, "fixed": 2, "pieces": 3,
-                 "pieces_unmapped": 1}
+                 "pieces_unmapped": 1, "stale_ids": [4, 11]}
+
+
+def test_seen_through_counts_points_a_true_beam_passed():
+    """Points between the laser and a wall are seen through, points behind the wall or
+    beyond the range limit are not; a scan counts when it saw through 30 % of them."""
+    from gatmo.pipeline.evaluate import seen_through
+    from tests.helpers import make_scan, room_grid
+
+    world = room_grid(10, 6, 0.05)
+    scan = make_scan(world, (2.0, 3.0, 0.0), n_beams=361, max_range_m=9.0)
+    pts = np.array([[4.0, 3.0], [6.0, 3.5], [9.95, 3.0], [11.0, 3.0], [8.0, 2.0]])
+    union, n = seen_through(pts, [scan], max_range_m=5.0)
+    assert union.tolist() == [True, True, False, False, False]  # in, behind the wall; 6 m off
+    assert n == 1
+    union, n = seen_through(pts, [scan], max_range_m=9.0)
+    assert union.tolist() == [True, True, False, False, True]
