@@ -48,11 +48,6 @@ class GatmoConfig(GatmoModel):
                                  description="of beams the map expects a hit for, on it")
     absence_min_agreement: float = Field(0.85, ge=0, le=1,
                                          description="stricter min_agreement for absence")
-    absence_carry_runs: int = Field(
-        0, ge=0, description="beyond the paper: evidence of absence (cells and beams seen "
-        "through, from confirmed poses) an object carries from up to this many earlier runs "
-        "while no return lands on it; a later run's beams still have to touch it before it "
-        "is marked absent. 0: each run starts afresh (the paper)")
     absence_from_verified_only: bool = Field(
         True, description="rays seen through objects count only from poses an independent "
         "check confirmed (pose_verified); other poses' returns still show objects there")

@@ -134,9 +134,6 @@ class GatmoMapper:
         self._loc_cells = self._grid.cells.copy()
         self._prov_near: np.ndarray | None = None  # cells within delta_W of such outlines
         self._run_open = False  # between begin_run and end_run
-        # absence_carry_runs: per object id, the evidence of absence of earlier runs (seen
-        # cells, rays, beams through, beams on, front, front seen through, runs carried)
-        self._carried: dict[int, dict] = {}
         self._prov_tick = 0  # scans GATMO took, for provisional_every_scans
         self._reset_run_evidence()
         self._build_owner()
@@ -273,7 +270,6 @@ class GatmoMapper:
 
     # ------------------------------------------------------------------ runs
     def begin_run(self, run_id: int) -> None:
-        self._carry_evidence()
         self.run = int(run_id)
         self._meta = []
         self._free[:] = 0
@@ -283,32 +279,6 @@ class GatmoMapper:
         self._near_returns[:] = 0
         self._reset_run_evidence()
         self._run_open = True
-
-    def _carry_evidence(self) -> None:
-        """Keep the last run's evidence of absence, added to what it carried from the runs
-        before (up to ``absence_carry_runs`` runs back), for the objects still placed."""
-        n = self.cfg.absence_carry_runs
-        carried: dict[int, dict] = {}
-        for oid in (set(self._through) | set(self._carried)) if n > 0 else ():
-            o = self.object_map.by_id.get(oid)
-            if o is None or o.status not in ("U", "M") or o.structure:
-                continue
-            old = self._carried.get(oid)
-            if old is not None and old["runs"] >= n:
-                old = None  # evidence older than n runs leaves at once
-            ev = {"seen": set(self._seen.get(oid, set())), "rays": self._rays.get(oid, 0),
-                  "through": self._through.get(oid, 0), "hits": self._hits.get(oid, 0),
-                  "front": set(self._front.get(oid, set())),
-                  "front_through": set(self._front_through.get(oid, set())), "runs": 1}
-            if old is not None:
-                ev["seen"] |= old["seen"]
-                ev["front_through"] = (old["front_through"] - ev["front"]) | ev["front_through"]
-                ev["front"] |= old["front"]
-                for k in ("rays", "through", "hits", "runs"):
-                    ev[k] += old[k]
-            if ev["through"] > 0:
-                carried[oid] = ev
-        self._carried = carried
 
     def end_run(self) -> list[Event]:
         """Dominant chairs seen this run and never matched become new objects (in M)."""
@@ -718,7 +688,6 @@ class GatmoMapper:
         for i in np.unique(hit_own[hit_own >= 0]):
             o = objs[int(i)]
             o.seen_count += 1
-            self._carried.pop(o.id, None)  # something stands there again
             if o.id in self._seen:  # returns on the object: those cells are there
                 self._seen[o.id].difference_update(hit_loc[hit_own == i].tolist())
         touched = self._beam_evidence(beams)
@@ -734,22 +703,13 @@ class GatmoMapper:
             seen = self._seen.get(oid, set())
             front = self._front.get(oid, set())
             front_through = self._front_through.get(oid, set())
-            rays = self._rays.get(oid, 0)
-            old = self._carried.get(oid)
-            if old is not None:  # absence_carry_runs: earlier runs' evidence counts too
-                seen = seen | old["seen"]
-                front_through = (old["front_through"] - front) | front_through
-                front = front | old["front"]
-                rays += old["rays"]
-                through += old["through"]
-                hits += old["hits"]
             frac = len(seen & core) / max(len(core), 1)
             # beyond Alg. 1: a short-range laser reaches only the near side of an object
             # (its rays end inside it at max range), so its core is never crossed; the
             # surface the beams should have ended on, seen through, is the same evidence
             frac_front = len(front_through) / max(len(front), 1)
             if (max(frac, frac_front) > c.beta_thresh
-                    and rays >= c.absence_min_rays
+                    and self._rays.get(oid, 0) >= c.absence_min_rays
                     and through >= c.absence_min_beams
                     and through >= c.absence_through_fraction * (through + hits)):
                 if not self._distinctive(o) and self._something_there(o):
@@ -882,16 +842,14 @@ class GatmoMapper:
         return touched
 
     def absence_evidence(self, object_id: int) -> dict:
-        """This run's evidence that object ``object_id`` is gone (Alg. 1 and the beams),
-        without what ``absence_carry_runs`` carried over: ``rays`` through its cells,
-        ``beams_through`` (passing well beyond it) and ``beams_on`` (ending on it),
-        ``core_seen`` and ``front_seen_through`` (fractions that beta_thresh is tested on),
-        ``doubted`` and ``carried_runs`` (0: nothing carried)."""
+        """This run's evidence that object ``object_id`` is gone (Alg. 1 and the beams):
+        ``rays`` through its cells, ``beams_through`` (passing well beyond it) and
+        ``beams_on`` (ending on it), ``core_seen`` and ``front_seen_through`` (the fractions
+        beta_thresh is tested on), and ``doubted``."""
         o = self.object_map.by_id.get(object_id)
         placed = o is not None and o.status in ("U", "M") and not o.structure
         core = self._core(o) if placed else set()
         front = self._front.get(object_id, set())
-        old = self._carried.get(object_id)
         return {
             "rays": self._rays.get(object_id, 0),
             "beams_through": self._through.get(object_id, 0),
@@ -900,11 +858,9 @@ class GatmoMapper:
             "front_seen_through": len(self._front_through.get(object_id, set()))
             / max(len(front), 1),
             "doubted": object_id in self._doubt,
-            "carried_runs": 0 if old is None else int(old["runs"]),
         }
 
     def _clear_evidence(self, oid: int) -> None:
-        self._carried.pop(oid, None)
         for d in (self._seen, self._rays, self._through, self._hits, self._front,
                   self._front_through, self._nudge_cells, self._nudge_scans, self._nudge_views,
                   self._nudge_tried):

@@ -1084,33 +1084,6 @@ def test_returns_beyond_a_partial_provisional_outline_stay_withheld(near_m):
     assert m.unexplained_at(past_end)[0] == (near_m < 0.1)
 
 
-@pytest.mark.parametrize(("carry_runs", "back", "absent"),
-                         [(0, False, False), (1, False, True), (1, True, False)])
-def test_evidence_of_absence_carried_to_the_next_run(carry_runs, back, absent):
-    """A 0.5 m box of the map is gone; in each of two runs the robot glances at its place
-    twice with a coarse laser (3 deg between beams): 12 rays through it per run, short of
-    ``absence_min_rays`` (20), so each run alone leaves it placed (the paper). With
-    ``absence_carry_runs`` 1 the first run's evidence counts in the second, and the box is
-    marked absent there. Had it come back for the second run, its returns drop what was
-    carried, and it stays."""
-    grid = room_grid(10, 6, 0.05, boxes=[(4.75, 2.75, 5.25, 3.25)])
-    m = GatmoMapper.from_config(CFG.model_copy(update={"absence_carry_runs": carry_runs}), grid)
-    box = [o for o in m.object_map.objects if not o.structure][0]
-    empty = room_grid(10, 6, 0.05)
-    events = []
-    for run, world in ((1, empty), (2, grid if back else empty)):
-        m.begin_run(run)
-        for i in range(2):
-            pose = np.array([3.0, 2.95 + 0.05 * i, 0.0])
-            stamp = 10.0 * run + i
-            s = make_scan(world, pose, n_beams=61, max_range_m=8.0, stamp_s=stamp)
-            events += m.update(pose, s, pose_confident=True, stamp_s=stamp)
-            assert m._rays.get(box.id, 0) < CFG.absence_min_rays or absent
-        events += m.end_run()
-    assert [(e.run, e.kind, e.object_id) for e in events] == ([(2, "absent", box.id)]
-                                                              if absent else [])
-
-
 def _one_run(m, scene, n_scans: int, max_range_m: float):
     """Drive ``m`` through one run: ``scene(i)`` gives scan i's (true pose, boxes in a
     12 x 6 m room); returns ({gamma object id: its xy}, {added object ids})."""
