@@ -204,9 +204,9 @@ def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
 
 def seen_through(points_xy: np.ndarray, scans, max_range_m: float,
                  beyond_m: float = 0.2) -> tuple[np.ndarray, int]:
-    """How well the true poses saw through ``points_xy`` (N, 2, map frame): per point, whether
-    any scan's beam passed it by more than ``beyond_m`` within ``max_range_m`` of the laser
-    (N,) bool, and the number of scans that saw through at least 30 % of the points. Scans
+    """How well the true poses saw through ``points_xy`` (N, 2, map frame). Returns (N,) bool,
+    whether any scan's beam passed the point by more than ``beyond_m`` within ``max_range_m``
+    of the laser, and the number of scans that saw through at least 30 % of the points. Scans
     carry ``gt_pose_xytheta`` and ``laser_pose_xytheta``; the beam nearest each point's
     bearing stands for it."""
     union = np.zeros(len(points_xy), dtype=bool)
@@ -220,7 +220,7 @@ def seen_through(points_xy: np.ndarray, scans, max_range_m: float,
         i = np.clip(np.searchsorted(a, b), 1, len(a) - 1)
         i -= (b - a[i - 1]) < (a[i] - b)
         inside = (b >= a[0]) & (b <= a[-1]) & (r <= max_range_m)
-        rng = np.nan_to_num(s.ranges_m[i], nan=0.0, posinf=0.0)
+        rng = np.nan_to_num(s.ranges_m[i], nan=0.0, posinf=np.inf)  # inf: no return, passed
         through = inside & (rng > r + beyond_m)
         union |= through
         n += int(through.mean() >= 0.3) if len(through) else 0
