@@ -699,16 +699,7 @@ class GatmoMapper:
             through, hits = self._through.get(oid, 0), self._hits.get(oid, 0)
             if through >= c.doubt_min_beams and through >= c.doubt_fraction * (through + hits):
                 self._doubt.add(oid)
-            core = self._core(o)
-            seen = self._seen.get(oid, set())
-            front = self._front.get(oid, set())
-            front_through = self._front_through.get(oid, set())
-            frac = len(seen & core) / max(len(core), 1)
-            # beyond Alg. 1: a short-range laser reaches only the near side of an object
-            # (its rays end inside it at max range), so its core is never crossed; the
-            # surface the beams should have ended on, seen through, is the same evidence
-            frac_front = len(front_through) / max(len(front), 1)
-            if (max(frac, frac_front) > c.beta_thresh
+            if (max(self._gone_fractions(o)) > c.beta_thresh
                     and self._rays.get(oid, 0) >= c.absence_min_rays
                     and through >= c.absence_min_beams
                     and through >= c.absence_through_fraction * (through + hits)):
@@ -841,6 +832,17 @@ class GatmoMapper:
             self._front.setdefault(oid, set()).update(loc[m & (through | on)].tolist())
         return touched
 
+    def _gone_fractions(self, o: MapObject) -> tuple[float, float]:
+        """(Alg. 1's fraction of the core cells seen through this run, the fraction of the
+        surface the beams should have ended on that they passed). Beyond Alg. 1, the second:
+        a short-range laser reaches only the near side of an object (its rays end inside it
+        at max range), so its core is never crossed; the surface seen through is the same
+        evidence."""
+        core = self._core(o)
+        frac = len(self._seen.get(o.id, set()) & core) / max(len(core), 1)
+        front = self._front.get(o.id, set())
+        return frac, len(self._front_through.get(o.id, set())) / max(len(front), 1)
+
     def absence_evidence(self, object_id: int) -> dict:
         """This run's evidence that object ``object_id`` is gone (Alg. 1 and the beams):
         ``rays`` through its cells, ``beams_through`` (passing well beyond it) and
@@ -848,15 +850,13 @@ class GatmoMapper:
         beta_thresh is tested on), and ``doubted``."""
         o = self.object_map.by_id.get(object_id)
         placed = o is not None and o.status in ("U", "M") and not o.structure
-        core = self._core(o) if placed else set()
-        front = self._front.get(object_id, set())
+        core_seen, front_seen_through = self._gone_fractions(o) if placed else (0.0, 0.0)
         return {
             "rays": self._rays.get(object_id, 0),
             "beams_through": self._through.get(object_id, 0),
             "beams_on": self._hits.get(object_id, 0),
-            "core_seen": len(self._seen.get(object_id, set()) & core) / max(len(core), 1),
-            "front_seen_through": len(self._front_through.get(object_id, set()))
-            / max(len(front), 1),
+            "core_seen": core_seen,
+            "front_seen_through": front_seen_through,
             "doubted": object_id in self._doubt,
         }
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from gatmo.geometry import compose, inverse, transform_points
+from gatmo.geometry import compose, inverse, points_to_beams, transform_points
 
 
 def _piece_points(piece: dict, res: float) -> np.ndarray:
@@ -213,12 +213,8 @@ def seen_through(points_xy: np.ndarray, scans, max_range_m: float,
     n = 0
     for s in scans:
         lp = compose(np.asarray(s.gt_pose_xytheta, dtype=float), s.laser_pose_xytheta)
-        d = points_xy - lp[:2]
-        r = np.hypot(d[:, 0], d[:, 1])
-        b = (np.arctan2(d[:, 1], d[:, 0]) - lp[2] + np.pi) % (2 * np.pi) - np.pi
+        r, b, i = points_to_beams(points_xy, lp, s.angles_rad)
         a = s.angles_rad
-        i = np.clip(np.searchsorted(a, b), 1, len(a) - 1)
-        i -= (b - a[i - 1]) < (a[i] - b)
         inside = (b >= a[0]) & (b <= a[-1]) & (r <= max_range_m)
         rng = np.nan_to_num(s.ranges_m[i], nan=0.0, posinf=np.inf)  # inf: no return, passed
         through = inside & (rng > r + beyond_m)
