@@ -124,7 +124,7 @@ class GatmoMapper:
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
-                       "seen_through_scans": 0}
+                       "seen_through_scans": 0, "bridged_scans": 0}
         self._ms: list[float] = []
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
@@ -384,6 +384,38 @@ class GatmoMapper:
             if self._prov_tick % self.cfg.provisional_every_scans == 0:
                 self._sync_localizer()
         self._ms.append((time.perf_counter() - t0) * 1e3)
+        return events
+
+    def bridged(self, pose_xytheta, scan: Scan, *, stamp_s: float,
+                hits_counted: bool) -> list[Event]:
+        """Evidence of absence only, from a scan taken earlier in this run whose pose was
+        bridged between two confirmed poses (the stack's ``fusion.bridge_evidence``): the
+        scan's rays and beams through objects count as a confirmed scan's would, and may mark
+        objects absent (events stamped ``stamp_s``, when the bridge closed); nothing is
+        tracked, nudged or masked. ``hits_counted``: :meth:`update` already had this scan from
+        a pose it was not told was confirmed, so its returns on objects were counted then and
+        are not counted again. Beyond the paper."""
+        events: list[Event] = []
+        lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
+        pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
+        near_any, _ = self._explained(pts)
+        if len(pts) and near_any.mean() < self.cfg.min_explained_fraction:
+            return events
+        kept = self._beams, self._expected
+        try:
+            beams = self._beams = self._classify_beams(lp, scan)
+            n, on = self._agreement(beams)
+            if n < self.cfg.agreement_min_beams or on < self.cfg.min_agreement * n:
+                return events
+            if hits_counted:  # the beams ending on objects were counted by update()
+                self._beams = (*beams[:3], np.zeros_like(beams[3]), *beams[4:])
+            else:
+                self._count_near_returns(pts, lp)
+            self.counts["bridged_scans"] += 1
+            self._absence(lp, scan, pts, stamp_s, events, agreement=on / max(n, 1),
+                          sees_through=True, count_hits=not hits_counted)
+        finally:
+            self._beams, self._expected = kept
         return events
 
     def unexplained_at(self, points_xy: np.ndarray, min_count: int = 2) -> np.ndarray:
@@ -648,11 +680,12 @@ class GatmoMapper:
 
     # Algorithm 1, with hits clearing seen-through marks (beyond the paper)
     def _absence(self, lp, scan, pts, stamp_s, events, agreement: float,
-                 sees_through: bool = True) -> None:
+                 sees_through: bool = True, count_hits: bool = True) -> None:
         """Alg. 1 and the beam evidence for one scan whose pose agrees with the map on
         ``agreement`` of the beams (:meth:`_agreement`). ``sees_through`` False (a pose only
         the filter vouches for): the scan's returns still show objects there, but its rays
-        and beams passing through objects are no evidence they are gone."""
+        and beams passing through objects are no evidence they are gone. ``count_hits``
+        False: this scan's returns on objects were counted before (:meth:`bridged`)."""
         g = self._grid
         c = self.cfg
         beams = self._beams
@@ -685,7 +718,7 @@ class GatmoMapper:
         self._passed[hit_cells[okh, 1], hit_cells[okh, 0]] = 0
         hit_own = self._owner[hit_cells[okh, 1], hit_cells[okh, 0]]
         hit_loc = self._local[hit_cells[okh, 1], hit_cells[okh, 0]]
-        for i in np.unique(hit_own[hit_own >= 0]):
+        for i in np.unique(hit_own[hit_own >= 0]) if count_hits else ():
             o = objs[int(i)]
             o.seen_count += 1
             if o.id in self._seen:  # returns on the object: those cells are there

@@ -559,6 +559,33 @@ def test_rays_from_unconfirmed_poses_do_not_make_objects_absent(verified_only, a
     assert ([e.kind for e in events] == ["absent"]) == absent
 
 
+@pytest.mark.parametrize("standing", [False, True])
+def test_scans_bridged_between_confirmed_poses_count_as_evidence_once(standing):
+    """The stack's bridge_evidence hands GATMO, as confirmed, scans it had first from poses not
+    confirmed: their rays make a gone box absent; a box that stands keeps its count of beams
+    ending on it (those were counted the first time), and is not marked absent."""
+    m, box, world = _one_object((10, 6), (5, 2.5, 5.5, 3.0),
+                                [(5, 2.5, 5.5, 3.0)] if standing else [])
+    scans = [make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=i)
+             for i, x in enumerate(np.linspace(2.0, 3.0, 6))]
+    for s in scans:
+        assert m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=s.stamp_s,
+                        pose_verified=False) == []
+    before = m.absence_evidence(box.id)
+    assert before["beams_through"] == 0 and (before["beams_on"] > 0) == standing
+    events = []
+    for s in scans:
+        events += m.bridged(s.gt_pose_xytheta, s, stamp_s=9.0, hits_counted=True)
+    after = m.absence_evidence(box.id)
+    assert m.counts["bridged_scans"] == 6
+    if standing:
+        assert events == [] and box.status == "U"
+        assert after["beams_on"] == before["beams_on"] and after["beams_through"] == 0
+    else:
+        assert [(e.kind, e.object_id, e.stamp_s) for e in events] == [("absent", box.id, 9.0)]
+        assert box.status == "A"
+
+
 @pytest.mark.parametrize("update, relocated, tracked", [
     ({}, True, True),
     ({"track_from_verified_only": True}, False, False),

@@ -185,6 +185,7 @@ class RecordingMapper:
     def __init__(self, grid=None):
         self.trusted = []
         self.verified = []
+        self.bridges = []  # (scan stamp, pose, stamp when bridged, hits_counted)
         self._grid = grid if grid is not None else room_grid(12, 6, 0.05)
 
     def begin_run(self, run_id):
@@ -193,6 +194,10 @@ class RecordingMapper:
     def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
         self.trusted.append(pose_confident)
         self.verified.append(pose_verified)
+        return []
+
+    def bridged(self, pose, scan, *, stamp_s, hits_counted):
+        self.bridges.append((scan.stamp_s, np.asarray(pose, dtype=float), stamp_s, hits_counted))
         return []
 
     def pop_map_changes(self):
@@ -218,6 +223,39 @@ def _trusted_along_straight(estimates_xytheta, fusion) -> np.ndarray:
     for s in scans:
         stack.step(s)
     return np.array(mapper.trusted)
+
+
+@pytest.mark.parametrize(("offset_at_10", "offset_at_20", "bridged"), [
+    ((0.0, 0.0), (0.0, 0.0), list(range(1, 10)) + list(range(11, 20))),
+    ((0.0, 0.0), (0.01, 0.0), list(range(1, 10)) + list(range(11, 20))),
+    ((0.0, 0.05), (0.0, 0.0), []),  # the chain does not close on scan 10: no bridge
+])
+def test_scans_between_confirmed_poses_are_bridged_along_odometry(offset_at_10, offset_at_20,
+                                                                  bridged):
+    """``bridge_evidence``: the filter is confident at scans 0, 10, 20 and 60 of a straight
+    drive (odometry exact). The scans between two of them are handed to GATMO as evidence at
+    the poses odometry carries the first to, the closing error spread along the way, if the
+    chain closes within 2 cm; 40 scans (4 m) are longer than a bridge may be."""
+    est = _STRAIGHT.copy()
+    est[10, :2] += offset_at_10
+    est[20, :2] += offset_at_20
+    grid = room_grid(12, 6, 0.05)
+    scans = [make_scan(grid, p, odom_pose_xytheta=p, stamp_s=0.1 * i)
+             for i, p in enumerate(_STRAIGHT)]
+    mapper = RecordingMapper()
+    stack = LocalizationStack(ScriptedLocalizer(est, confident_at=(0, 10, 20, 60)), None, mapper,
+                              FusionConfig(align_to_map=False, bridge_evidence=True))
+    stack.begin_run(1)
+    for sc in scans:
+        stack.step(sc)
+    got = [round(b[0] / 0.1) for b in mapper.bridges]
+    assert got == bridged and stack.n_bridged == len(bridged)
+    for k, pose, when, hits_counted in mapper.bridges:
+        i = round(k / 0.1)
+        anchor = 10 if i < 10 else 20
+        spread = np.array([*offset_at_20, 0.0]) * (i - 10) / 10 if anchor == 20 else 0.0
+        np.testing.assert_allclose(pose, _STRAIGHT[i] + spread, atol=1e-9)
+        assert when == pytest.approx(0.1 * anchor) and not hits_counted
 
 
 def test_gatmo_waits_after_the_localizer_jumps():
