@@ -133,7 +133,14 @@ class FusionConfig(GatmoModel):
     (:meth:`gatmo.objects.mapper.GatmoMapper.bridged`). GATMO takes a ray as evidence only
     from a confirmed pose, and about a tenth of a run's scans are; the soak's stale objects
     were seen through from the true poses, but from none of those scans, in 23-32 % of
-    cases.
+    cases. Off: it hands GATMO 2-3 times the scans (soak seeds 11 and 12, 50 runs: 895 ->
+    2,058 and 856 -> 2,203), and objects left stale at a run's start fall (845 -> 661 and
+    916 -> 821 object-runs; after run 50, 25 and 27 objects placed for 30 and 28 things
+    standing, against 32 and 38), but the halls notice no more pieces gone (hall seeds
+    100-112 and 400-411: 127 -> 124 and 124 -> 128), find fewer (41 -> 36 and 32 -> 31), and
+    seeds 105 and 408 are lost where they were not (ATE 0.15 -> 3.05 m, 0.21 -> 2.15 m); soak
+    seed 11's time lost over runs 11-50 is 47 % instead of 27 % (seed 12: 35 % instead of 38
+    %). docs/experiments.md, eighteenth session.
 
     ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
     estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
