@@ -220,6 +220,13 @@ class GatmoConfig(GatmoModel):
         0.5, ge=0, le=1, description="of a new object's cells, the fraction rays may have "
         "passed (match_free_rays of them, going on add_gone_beyond_m or more) since a return "
         "last landed there: above it, it has gone again this run and is not added")
+    add_max_flicker: float = Field(
+        0.6, ge=0, le=1, description="of the beams that reached a new object's cells this "
+        "run after a return first landed there, the fraction that may have passed well "
+        "beyond them (median over the cells returns landed in): above it, it came and went "
+        "(people, a door) and is not added; 1: no test. Things added in simulated halls: 0-0.18; "
+        "on the Intel log a chair there at the last two visits 0.41, two things gone on most "
+        "visits 0.86")
     add_gone_beyond_m: float = Field(
         0.25, gt=0, description="a ray counts as passing a cell for add_max_passed_fraction "
         "only if it ends this far beyond it")

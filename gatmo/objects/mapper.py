@@ -112,6 +112,11 @@ class GatmoMapper:
         self._next_meta = 1
         self._free = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._passed = np.zeros(self._grid.cells.shape, dtype=np.int32)
+        # this run's beams passing well beyond a cell and returns in it, never cleared by
+        # each other (add_max_flicker)
+        self._passed_run = np.zeros(self._grid.cells.shape, dtype=np.int32)
+        self._hit_run = np.zeros(self._grid.cells.shape, dtype=np.int32)
+        self.flicker: dict[int, float] = {}  # per new object at the last end_run: _flicker()
         self._unexplained = np.zeros(self._grid.cells.shape, dtype=np.int32)
         self._unexplained_dilated: np.ndarray | None = None
         # returns this run not explained by walls or other structure (on or near an object, or
@@ -124,7 +129,7 @@ class GatmoMapper:
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
-                       "seen_through_scans": 0, "bridged_scans": 0}
+                       "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0}
         self._ms: list[float] = []
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
@@ -274,6 +279,8 @@ class GatmoMapper:
         self._meta = []
         self._free[:] = 0
         self._passed[:] = 0
+        self._passed_run[:] = 0
+        self._hit_run[:] = 0
         self._unexplained[:] = 0
         self._unexplained_dilated = None
         self._near_returns[:] = 0
@@ -283,6 +290,7 @@ class GatmoMapper:
     def end_run(self) -> list[Event]:
         """Dominant chairs seen this run and never matched become new objects (in M)."""
         events: list[Event] = []
+        self.flicker = {}
         for m in self._meta:
             if m.dominant() == "chair" and m.matched_object is None and not self._settle(
                     m, m.last_seen, events):
@@ -304,6 +312,10 @@ class GatmoMapper:
                        ) > self.cfg.add_max_passed_fraction:
                 self.counts["gamma_gone"] += 1
                 continue
+            flicker = self.flicker[o.id] = self._flicker(cy, cx)
+            if flicker > self.cfg.add_max_flicker:
+                self.counts["gamma_flicker"] += 1
+                continue
             if np.mean(taken[cy, cx]) > 0.3:
                 continue
             # beyond the paper: returns in space the static map never knew (through a window,
@@ -318,6 +330,19 @@ class GatmoMapper:
             self.counts["added"] += 1
         self._rerender()
         return events
+
+    def _flicker(self, cy: np.ndarray, cx: np.ndarray) -> float:
+        """Of the beams that reached a new object's cells this run since a return first
+        landed there, the fraction that passed well beyond them instead of ending there: the
+        median over its cells that some return landed in (0 when none did). Beyond the
+        paper: a thing gone most times it was looked at (a door swinging, people coming and
+        going) is not furniture."""
+        h = self._hit_run[cy, cx]
+        p = self._passed_run[cy, cx]
+        sel = h > 0
+        if not sel.any():
+            return 0.0
+        return float(np.median(p[sel] / (p[sel] + h[sel])))
 
     # ---------------------------------------------------------------- update
     def update(self, pose_xytheta, scan: Scan, *, pose_confident: bool,
@@ -695,6 +720,7 @@ class GatmoMapper:
             # agreement fell to 0.76-0.88)
             if sees_through and agreement >= c.add_gone_min_agreement:
                 self._mark_passed(lp, scan, pts, from_m=0.0)
+                self._count_run_hits(lp, pts)
             return
         if not sees_through:
             # beyond the paper: a filter locked onto the wrong place is as confident as a
@@ -710,6 +736,7 @@ class GatmoMapper:
             self.counts["seen_through_scans"] += 1
             self._mark_seen_through(lp, ends)
             self._mark_passed(lp, scan, pts, from_m=c.absence_max_range_m)
+            self._count_run_hits(lp, pts)
         objs = self.object_map.objects
         hit_cells = g.world_to_cell(pts)
         okh = g.in_bounds(hit_cells)
@@ -758,6 +785,7 @@ class GatmoMapper:
         # (a chair grid smeared by pose jitter has cells just in front of the surface)
         beyond = np.hypot(*(g.cell_to_world(cells) - ends[ray]).T) > self.cfg.add_gone_beyond_m
         np.add.at(self._passed, (cells[beyond, 1], cells[beyond, 0]), 1)
+        self._count_run_passes(cells[beyond])
         objs = self.object_map.objects
         own = self._owner[cells[:, 1], cells[:, 0]]
         for i in np.unique(own[own >= 0]):
@@ -784,6 +812,22 @@ class GatmoMapper:
         keep = ((np.hypot(*(xy - lp[:2]).T) > from_m - c.add_gone_beyond_m)
                 & (np.hypot(*(xy - ends[ray]).T) > c.add_gone_beyond_m))
         np.add.at(self._passed, (cells[keep, 1], cells[keep, 0]), 1)
+        self._count_run_passes(cells[keep])
+
+    def _count_run_passes(self, cells: np.ndarray) -> None:
+        """Rays passing well beyond ``cells`` (K, 2), counted where a return has landed this
+        run (add_max_flicker: a thing that came mid-run and stayed has not come and gone)."""
+        cells = cells[self._hit_run[cells[:, 1], cells[:, 0]] > 0]
+        np.add.at(self._passed_run, (cells[:, 1], cells[:, 0]), 1)
+
+    def _count_run_hits(self, lp, pts: np.ndarray) -> None:
+        """The returns ``pts`` (N, 2) within add_gone_max_range_m, as the rays counted in
+        ``_passed_run`` (add_max_flicker)."""
+        g = self._grid
+        near = pts[np.hypot(*(pts - lp[:2]).T) <= self.cfg.add_gone_max_range_m]
+        c = g.world_to_cell(near)
+        c = c[g.in_bounds(c)]
+        np.add.at(self._hit_run, (c[:, 1], c[:, 0]), 1)
 
     def _classify_beams(self, lp, scan):
         """Per beam: (owner of the cell the map expects it to end on: object index, STRUCTURE

@@ -1194,3 +1194,28 @@ def test_a_piece_whose_place_no_beam_reached_is_not_shifted_onto_a_look_alike(sh
         assert len(added) == 1
         cells = m.object_map.by_id[added[0].object_id].cells_world()  # the sides seen of it
         assert np.all((cells >= [2.2, 2.4]) & (cells <= [2.9, 3.1]))
+
+
+@pytest.mark.parametrize(("max_flicker", "there_of_12", "n_added"), [
+    (0.6, 3, 1),  # there a quarter of the time: not added (the default)
+    (0.6, 6, 2),  # there half the time: added
+    (1.0, 3, 2),  # no test
+])
+def test_a_thing_that_comes_and_goes_all_run_is_not_added(max_flicker, there_of_12, n_added):
+    """A 0.6 m box is there for ``there_of_12`` scans of every 12, gone for the rest, and
+    there for the run's last 10 scans (a door swinging, people who stand and go): of the beams
+    that reach its cells after its first return, most pass on. Above add_max_flicker of them
+    it is not added; a box standing all run is."""
+
+    def scene(i):
+        pose = np.array([3.0 + 0.02 * i, 3.0, 0.0])
+        there = i % 12 < there_of_12 or i >= 110
+        return pose, [(2.0, 1.5, 2.4, 1.9)] + ([(6.4, 2.7, 7.0, 3.3)] if there else [])
+
+    m = GatmoMapper.from_config(CFG.model_copy(update={"add_max_flicker": max_flicker}),
+                                room_grid(12, 6, 0.05))
+    seen, added = _one_run(m, scene, 120, max_range_m=8.0)
+    steady = [k for k in seen if np.hypot(*(seen[k] - [2.2, 1.7])) < 0.3]
+    assert len(steady) == 1 and steady[0] in added and m.flicker[steady[0]] == 0.0
+    assert len(added) == n_added
+    assert m.counts["gamma_flicker"] == 2 - n_added
