@@ -196,22 +196,37 @@ def main(argv=None) -> int:
                 rows.append(row)
                 print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
                                for k, v in row.items() if k != "outcomes"), flush=True)
+    total = summarize(rows, preset=args.preset, runs=args.runs, overrides=args.set,
+                      before=not args.no_before)
+    print(json.dumps(total, indent=1))
+    OUT.mkdir(exist_ok=True)
+    (OUT / f"gatmo_sim_{args.preset}{args.tag}.json").write_text(json.dumps({"rows": rows,
+                                                                   "total": total}, indent=1))
+    fig_5(rows, OUT / f"fig5_{args.preset}{args.tag}.png")
+    return 0
+
+
+def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
+              before: bool) -> dict:
+    """The totals over the seeds' rows (one_seed): medians, means and sums of the numbers;
+    per-seed lists (the ids of stale objects) and the outcomes are left to the rows."""
     from gatmo.pipeline.evaluate import CENSUS_KEYS
 
-    a = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0] if k != "outcomes"}
+    a = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0]
+         if k != "outcomes" and not isinstance(rows[0][k], list)}
     total = {
-        "preset": args.preset, "seeds": len(rows), "overrides": args.set,
+        "preset": preset, "seeds": len(rows), "overrides": overrides,
         "gatmo_over_static_ate_median": float(np.median(a["gatmo_ate_m"] / a["static_ate_m"])),
-        "gatmo_over_before_ate_median": (None if args.no_before else
-                                         float(np.median(a["gatmo_ate_m"] / a["before_ate_m"]))),
+        "gatmo_over_before_ate_median": (float(np.median(a["gatmo_ate_m"] / a["before_ate_m"]))
+                                         if before else None),
         "seeds_gatmo_not_worse": int(np.sum(a["gatmo_ate_m"] <= a["static_ate_m"] * 1.05)),
         "static_lost_mean": float(a["static_lost"].mean()),
         "gatmo_lost_mean": float(a["gatmo_lost"].mean()),
         "found_over_moved": float(a["found"].sum() / max(a["moved"].sum(), 1)),
         "absent_recall": float(a["gone_noticed"].sum() / max(a["gone"].sum(), 1)),
-        "false_relocations_per_run": float(a["false_relocations"].sum() / (len(rows) * args.runs)),
-        "twin_relocations_per_run": float(a["twin_relocations"].sum() / (len(rows) * args.runs)),
-        "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * args.runs)),
+        "false_relocations_per_run": float(a["false_relocations"].sum() / (len(rows) * runs)),
+        "twin_relocations_per_run": float(a["twin_relocations"].sum() / (len(rows) * runs)),
+        "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * runs)),
         # after the last run, per seed: objects on pieces, second objects on a piece, objects
         # where no piece stands, pieces no object stands on (map_census)
         "last_run_census_per_seed": {k: float(a[f"last_{k}"].mean()) for k in CENSUS_KEYS},
@@ -229,14 +244,8 @@ def main(argv=None) -> int:
     total["off_old_place_over_seen_old"] = sum(
         o["outcome"] in ("found", "twin", "wrong", "absent") for o in seen_old) / max(
         len(seen_old), 1)
-    table = table_ii(rows)
-    total["table_ii"] = table
-    print(json.dumps(total, indent=1))
-    OUT.mkdir(exist_ok=True)
-    (OUT / f"gatmo_sim_{args.preset}{args.tag}.json").write_text(json.dumps({"rows": rows,
-                                                                   "total": total}, indent=1))
-    fig_5(rows, OUT / f"fig5_{args.preset}{args.tag}.png")
-    return 0
+    total["table_ii"] = table_ii(rows)
+    return total
 
 
 if __name__ == "__main__":
