@@ -124,9 +124,13 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--run", default=str(OUT / "real_compare" / "intel-demo" / "cmp"),
                     help="a `gatmo compare` output directory of the Intel log")
+    ap.add_argument("--folder", default="01_intel",
+                    help="the run under gatmo/ (e.g. 02_intel_2of2 of a --split 2 compare): "
+                    "only the reference scans within its poses' time span count, so the last "
+                    "visit is that run's last")
     args = ap.parse_args(argv or [])
     corrected = DATA / "radish-corrected" / "intel-corrected.log.gz"
-    run = Path(args.run) / "gatmo" / "01_intel"
+    run = Path(args.run) / "gatmo" / args.folder
     if not corrected.exists():
         print(f"skipped: {corrected} not found (the corrected Intel log is needed)")
         return 0
@@ -151,6 +155,11 @@ def main(argv=None) -> int:
              **{k: "added" for k in added}}
     things = {k: omap.by_id[k].cells_world() for k in sorted(group)}
     scans = intel_reference_scans()
+    if (run / "poses.tum").exists():  # the run's own time span (a part of a split log)
+        from gatmo.datasets.tum import read_tum
+
+        t_run, _ = read_tum(run / "poses.tum")
+        scans = [s for s in scans if t_run[0] <= s.stamp_s <= t_run[-1]]
     stamps = np.array([s.stamp_s for s in scans]) - INTEL_SHIFT_S
     seen = sightings(things, scans)
     rows = []
