@@ -362,22 +362,13 @@ class GatmoMapper:
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
         near_any, explained = self._explained(pts)
-        if len(pts) and near_any.mean() < self.cfg.min_explained_fraction:
-            # most returns off the map: the pose is wrong however confident the filter is
-            self.counts["skipped_poor_fit"] += 1
-            self._expire(stamp_s, events)
-            return events
-        self._beams = beams = self._classify_beams(lp, scan)
-        n, on = self._agreement(beams)
-        if n < self.cfg.agreement_min_beams or on < self.cfg.min_agreement * n:
-            # beyond the paper: too little of what the map expects (walls, columns, furniture
-            # that stayed) is where this pose says; a wrong pose sees through small objects
-            # and makes phantom chairs, so the scan is skipped
-            self.counts["skipped_disagreement"] += 1
+        fit = self._fits_map(lp, scan, pts, near_any)
+        if isinstance(fit, str):
+            self.counts[fit] += 1
             self._expire(stamp_s, events)
             return events
         self._count_near_returns(pts, lp)
-        self._absence(lp, scan, pts, stamp_s, events, agreement=on / max(n, 1),
+        self._absence(lp, scan, pts, stamp_s, events, agreement=fit,
                       sees_through=bool(pose_verified) or not self.cfg.absence_from_verified_only)
         if events:  # the map changed: explain against the new one
             near_any, explained = self._explained(pts)
@@ -411,6 +402,23 @@ class GatmoMapper:
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
 
+    def _fits_map(self, lp, scan: Scan, pts: np.ndarray, near_any: np.ndarray) -> float | str:
+        """The map's test of the pose a scan is laid from (laser at ``lp``, returns ``pts``
+        (N, 2), ``near_any`` from :meth:`_explained`): the fraction of the beams the map
+        expects that agree (:meth:`_agreement`; the beams are kept in ``_beams``), or the
+        name of the count of why the scan is skipped."""
+        if len(pts) and near_any.mean() < self.cfg.min_explained_fraction:
+            # most returns off the map: the pose is wrong however confident the filter is
+            return "skipped_poor_fit"
+        self._beams = self._classify_beams(lp, scan)
+        n, on = self._agreement(self._beams)
+        if n < self.cfg.agreement_min_beams or on < self.cfg.min_agreement * n:
+            # beyond the paper: too little of what the map expects (walls, columns, furniture
+            # that stayed) is where this pose says; a wrong pose sees through small objects
+            # and makes phantom chairs, so the scan is skipped
+            return "skipped_disagreement"
+        return on / max(n, 1)
+
     def bridged(self, pose_xytheta, scan: Scan, *, stamp_s: float,
                 hits_counted: bool) -> list[Event]:
         """Evidence of absence only, from a scan taken earlier in this run whose pose was
@@ -423,21 +431,18 @@ class GatmoMapper:
         events: list[Event] = []
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
-        near_any, _ = self._explained(pts)
-        if len(pts) and near_any.mean() < self.cfg.min_explained_fraction:
-            return events
         kept = self._beams, self._expected
         try:
-            beams = self._beams = self._classify_beams(lp, scan)
-            n, on = self._agreement(beams)
-            if n < self.cfg.agreement_min_beams or on < self.cfg.min_agreement * n:
+            fit = self._fits_map(lp, scan, pts, self._explained(pts)[0])
+            if isinstance(fit, str):
                 return events
             if hits_counted:  # the beams ending on objects were counted by update()
-                self._beams = (*beams[:3], np.zeros_like(beams[3]), *beams[4:])
+                b = self._beams
+                self._beams = (*b[:3], np.zeros_like(b[3]), *b[4:])
             else:
                 self._count_near_returns(pts, lp)
             self.counts["bridged_scans"] += 1
-            self._absence(lp, scan, pts, stamp_s, events, agreement=on / max(n, 1),
+            self._absence(lp, scan, pts, stamp_s, events, agreement=fit,
                           sees_through=True, count_hits=not hits_counted)
         finally:
             self._beams, self._expected = kept
@@ -784,8 +789,7 @@ class GatmoMapper:
         # rays that went on well beyond a cell: the evidence that a new object is gone again
         # (a chair grid smeared by pose jitter has cells just in front of the surface)
         beyond = np.hypot(*(g.cell_to_world(cells) - ends[ray]).T) > self.cfg.add_gone_beyond_m
-        np.add.at(self._passed, (cells[beyond, 1], cells[beyond, 0]), 1)
-        self._count_run_passes(cells[beyond])
+        self._count_passes(cells[beyond])
         objs = self.object_map.objects
         own = self._owner[cells[:, 1], cells[:, 0]]
         for i in np.unique(own[own >= 0]):
@@ -811,12 +815,13 @@ class GatmoMapper:
         xy = g.cell_to_world(cells)
         keep = ((np.hypot(*(xy - lp[:2]).T) > from_m - c.add_gone_beyond_m)
                 & (np.hypot(*(xy - ends[ray]).T) > c.add_gone_beyond_m))
-        np.add.at(self._passed, (cells[keep, 1], cells[keep, 0]), 1)
-        self._count_run_passes(cells[keep])
+        self._count_passes(cells[keep])
 
-    def _count_run_passes(self, cells: np.ndarray) -> None:
-        """Rays passing well beyond ``cells`` (K, 2), counted where a return has landed this
-        run (add_max_flicker: a thing that came mid-run and stayed has not come and gone)."""
+    def _count_passes(self, cells: np.ndarray) -> None:
+        """Rays passing well beyond ``cells`` (K, 2): in ``_passed`` (add_max_passed_fraction)
+        and, where a return has landed this run, in ``_passed_run`` (add_max_flicker: a thing
+        that came mid-run and stayed has not come and gone)."""
+        np.add.at(self._passed, (cells[:, 1], cells[:, 0]), 1)
         cells = cells[self._hit_run[cells[:, 1], cells[:, 0]] > 0]
         np.add.at(self._passed_run, (cells[:, 1], cells[:, 0]), 1)
 
