@@ -301,6 +301,11 @@ class GatmoMapper:
         for o in sorted(self.object_map.Gamma, key=lambda g: -len(g.shape_xy)):
             if len(o.shape_xy) < self.cfg.add_min_cells:
                 continue
+            if o.id not in self._gamma_this_run:
+                # seen in an earlier run only: the tests below count this run's rays, and a
+                # thing turned down then (gone again, coming and going) would pass them now
+                # with no ray at all (the Intel log cut in two added two such things)
+                continue
             c = self._grid.world_to_cell(o.cells_world())
             c = c[self._grid.in_bounds(c)]
             if not len(c):  # off the map

@@ -1111,10 +1111,10 @@ def test_returns_beyond_a_partial_provisional_outline_stay_withheld(near_m):
     assert m.unexplained_at(past_end)[0] == (near_m < 0.1)
 
 
-def _one_run(m, scene, n_scans: int, max_range_m: float):
+def _one_run(m, scene, n_scans: int, max_range_m: float, run_id: int = 1):
     """Drive ``m`` through one run: ``scene(i)`` gives scan i's (true pose, boxes in a
     12 x 6 m room); returns ({gamma object id: its xy}, {added object ids})."""
-    m.begin_run(1)
+    m.begin_run(run_id)
     events = []
     for i in range(n_scans):
         pose, boxes = scene(i)
@@ -1219,3 +1219,26 @@ def test_a_thing_that_comes_and_goes_all_run_is_not_added(max_flicker, there_of_
     assert len(steady) == 1 and steady[0] in added and m.flicker[steady[0]] == 0.0
     assert len(added) == n_added
     assert m.counts["gamma_flicker"] == 2 - n_added
+
+
+def test_a_thing_turned_down_in_an_earlier_run_is_not_added_unseen():
+    """A box that came and went all run 1 stays out of the map (add_max_flicker) and in
+    Gamma. Run 2 never comes near it: no ray of run 2 reaches it, so nothing this run says
+    it stands there, and it is not added then either (on the Intel log cut in two, two
+    things turned down in the first half were added at the end of the second)."""
+
+    def run1(i):
+        pose = np.array([3.0 + 0.02 * i, 3.0, 0.0])
+        there = i % 12 < 3 or i >= 110
+        return pose, [(2.0, 1.5, 2.4, 1.9)] + ([(6.4, 2.7, 7.0, 3.3)] if there else [])
+
+    def run2(i):  # the robot stays at the room's west end; the box is 4 m beyond its laser
+        return np.array([1.0 + 0.005 * i, 4.5, 0.0]), [(2.0, 1.5, 2.4, 1.9)]
+
+    m = GatmoMapper.from_config(CFG, room_grid(12, 6, 0.05))
+    seen, added = _one_run(m, run1, 120, max_range_m=8.0)
+    box = [k for k in seen if np.hypot(*(seen[k] - [6.7, 3.0])) < 0.5]
+    assert len(box) == 1 and box[0] not in added and m.counts["gamma_flicker"] == 1
+    assert m.object_map.by_id[box[0]].status == "Gamma"
+    _, added2 = _one_run(m, run2, 40, max_range_m=2.0, run_id=2)
+    assert box[0] not in added2 and m.object_map.by_id[box[0]].status == "Gamma"
