@@ -304,7 +304,7 @@ class GatmoMapper:
             if o.id not in self._gamma_this_run:
                 # seen in an earlier run only: the tests below count this run's rays, and a
                 # thing turned down then (gone again, coming and going) would pass them now
-                # with no ray at all (the Intel log cut in two added two such things)
+                # with no ray at all (the Intel log cut in two added three such things)
                 continue
             c = self._grid.world_to_cell(o.cells_world())
             c = c[self._grid.in_bounds(c)]

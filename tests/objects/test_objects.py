@@ -1224,7 +1224,7 @@ def test_a_thing_that_comes_and_goes_all_run_is_not_added(max_flicker, there_of_
 def test_a_thing_turned_down_in_an_earlier_run_is_not_added_unseen():
     """A box that came and went all run 1 stays out of the map (add_max_flicker) and in
     Gamma. Run 2 never comes near it: no ray of run 2 reaches it, so nothing this run says
-    it stands there, and it is not added then either (on the Intel log cut in two, two
+    it stands there, and it is not added then either (on the Intel log cut in two, three
     things turned down in the first half were added at the end of the second)."""
 
     def run1(i):
