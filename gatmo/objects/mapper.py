@@ -298,13 +298,12 @@ class GatmoMapper:
         self._meta = []
         self._run_open = False  # the provisional landmarks leave the localizer's map
         taken = self._grid.occupied.copy()  # the map, and what is added below
-        for o in sorted(self.object_map.Gamma, key=lambda g: -len(g.shape_xy)):
+        # only what a track of this run saw: the tests below count this run's rays, and a thing
+        # seen in an earlier run only and turned down then (gone again, coming and going) would
+        # pass them with no ray at all (the Intel log cut in two added three such things)
+        seen = [g for g in self.object_map.Gamma if g.id in self._gamma_this_run]
+        for o in sorted(seen, key=lambda g: -len(g.shape_xy)):
             if len(o.shape_xy) < self.cfg.add_min_cells:
-                continue
-            if o.id not in self._gamma_this_run:
-                # seen in an earlier run only: the tests below count this run's rays, and a
-                # thing turned down then (gone again, coming and going) would pass them now
-                # with no ray at all (the Intel log cut in two added three such things)
                 continue
             c = self._grid.world_to_cell(o.cells_world())
             c = c[self._grid.in_bounds(c)]
