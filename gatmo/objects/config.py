@@ -216,6 +216,11 @@ class GatmoConfig(GatmoModel):
         "explained by it (no longer withheld from the localizer)")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
+    match_gamma_to_absent: bool = Field(
+        False, description="beyond the paper: at a run's end, a chair seen this run that never "
+        "passed the matching tests while its track lasted (often too little seen: one face "
+        "of a large piece) and is still there relocates an absent object it fits (score, free "
+        "space, not larger) instead of joining the map as a new object; best fits first")
     add_max_passed_fraction: float = Field(
         0.5, ge=0, le=1, description="of a new object's cells, the fraction rays may have "
         "passed (match_free_rays of them, going on add_gone_beyond_m or more) since a return "

@@ -129,7 +129,8 @@ class GatmoMapper:
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
-                       "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0}
+                       "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0,
+                       "absent_to_gamma": 0}
         self._ms: list[float] = []
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
@@ -297,29 +298,18 @@ class GatmoMapper:
                 self._to_gamma(m, m.last_seen, events)
         self._meta = []
         self._run_open = False  # the provisional landmarks leave the localizer's map
-        taken = self._grid.occupied.copy()  # the map, and what is added below
         # only what a track of this run saw: the tests below count this run's rays, and a thing
         # seen in an earlier run only and turned down then (gone again, coming and going) would
         # pass them with no ray at all (the Intel log cut in two added three such things)
         seen = [g for g in self.object_map.Gamma if g.id in self._gamma_this_run]
-        for o in sorted(seen, key=lambda g: -len(g.shape_xy)):
-            if len(o.shape_xy) < self.cfg.add_min_cells:
-                continue
+        kept = [o for o in sorted(seen, key=lambda g: -len(g.shape_xy)) if self._stays(o)]
+        if self.cfg.match_gamma_to_absent:
+            kept = self._match_absent_to_gamma(kept, events)
+        taken = self._grid.occupied.copy()  # the map, and what is added below
+        for o in kept:
             c = self._grid.world_to_cell(o.cells_world())
             c = c[self._grid.in_bounds(c)]
-            if not len(c):  # off the map
-                continue
             cy, cx = c[:, 1], c[:, 0]
-            # beyond the paper: where rays went on well past its cells after the last return
-            # landed there, it has gone again (a person who stood a while, a cart wheeled off)
-            if np.mean(self._passed[cy, cx] >= self.cfg.match_free_rays
-                       ) > self.cfg.add_max_passed_fraction:
-                self.counts["gamma_gone"] += 1
-                continue
-            flicker = self.flicker[o.id] = self._flicker(cy, cx)
-            if flicker > self.cfg.add_max_flicker:
-                self.counts["gamma_flicker"] += 1
-                continue
             if np.mean(taken[cy, cx]) > 0.3:
                 continue
             # beyond the paper: returns in space the static map never knew (through a window,
@@ -334,6 +324,56 @@ class GatmoMapper:
             self.counts["added"] += 1
         self._rerender()
         return events
+
+    def _stays(self, o: MapObject) -> bool:
+        """A Gamma object seen this run is still there at the run's end: large enough, on the
+        map, not gone again, not coming and going (the end-of-run tests before it is added)."""
+        if len(o.shape_xy) < self.cfg.add_min_cells:
+            return False
+        c = self._grid.world_to_cell(o.cells_world())
+        c = c[self._grid.in_bounds(c)]
+        if not len(c):  # off the map
+            return False
+        cy, cx = c[:, 1], c[:, 0]
+        # beyond the paper: where rays went on well past its cells after the last return
+        # landed there, it has gone again (a person who stood a while, a cart wheeled off)
+        if np.mean(self._passed[cy, cx] >= self.cfg.match_free_rays
+                   ) > self.cfg.add_max_passed_fraction:
+            self.counts["gamma_gone"] += 1
+            return False
+        flicker = self.flicker[o.id] = self._flicker(cy, cx)
+        if flicker > self.cfg.add_max_flicker:
+            self.counts["gamma_flicker"] += 1
+            return False
+        return True
+
+    def _match_absent_to_gamma(self, kept: list[MapObject], events) -> list[MapObject]:
+        """Beyond the paper, the other order of its "new absences with old chairs": an object
+        absent when a chair was seen whose track never passed the matching tests while it
+        lasted (most often too little of the object seen: one face of a large piece) is
+        matched at the run's end to that chair, now a Gamma object (``kept``: those still
+        there), before the chair would be added as a new object; the best fits first, each
+        object and each chair once. Returns the Gamma objects left."""
+        fits = []
+        for o in self.object_map.A:
+            if o.structure:
+                continue
+            for g in kept:
+                if _diameter(g.shape_xy) > _diameter(o.shape_xy) + 3 * o.resolution_m:
+                    continue  # what was seen is larger than the object
+                mt = self._fit_gamma(g, o)
+                if mt is not None:
+                    key = _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta))
+                    fits.append((key, len(fits), o, g, mt))
+        used: set[int] = set()
+        for _, _, o, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
+            if o.id in used or g.id in used:
+                continue
+            used |= {o.id, g.id}
+            self.object_map.objects.remove(g)
+            self._relocate(o, mt, self._last_stamp, events)
+            self.counts["absent_to_gamma"] += 1
+        return [g for g in kept if g.id not in used]
 
     def _flicker(self, cy: np.ndarray, cx: np.ndarray) -> float:
         """Of the beams that reached a new object's cells this run since a return first

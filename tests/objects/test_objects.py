@@ -1242,3 +1242,32 @@ def test_a_thing_turned_down_in_an_earlier_run_is_not_added_unseen():
     assert m.object_map.by_id[box[0]].status == "Gamma"
     _, added2 = _one_run(m, run2, 40, max_range_m=2.0, run_id=2)
     assert box[0] not in added2 and m.object_map.by_id[box[0]].status == "Gamma"
+
+
+@pytest.mark.parametrize(("to_absent", "relocated"), [(True, True), (False, False)])
+def test_an_absent_piece_seen_by_one_face_is_matched_at_the_run_end(to_absent, relocated):
+    # map: a 1.2 x 1.0 cabinet at the top left; world: it stands at the bottom middle. The
+    # robot sees its old place empty (absent), then only its north face, from the north: too
+    # little of its outline for a match while the track lasts. At the run's end that chair
+    # relocates the cabinet (gatmo.match_gamma_to_absent) instead of joining as a new object
+    cfg = CFG.model_copy(update={"match_gamma_to_absent": to_absent})
+    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.7, 5.2)])
+    world = room_grid(12, 6, 0.05, boxes=[(6.0, 0.8, 7.2, 1.8)])
+    om = ObjectMap.from_grid(g, cfg)
+    cab = [o for o in om.objects if not o.structure][0]
+    m = GatmoMapper(om, g, cfg)
+    m.begin_run(1)
+    path = [(x, 3.0, np.pi / 2) for x in np.linspace(1.2, 3.2, 20)]
+    path += [(x, 3.6, -np.pi / 2) for x in np.linspace(5.9, 7.3, 25)]
+    events = _drive(m, world, path, max_range_m=4.0, n_beams=181)
+    assert m.refusals.get((cab.id, "too_little"), 0) > 0, m.refusals  # never matched mid-run
+    events += m.end_run()
+    kinds = [e.kind for e in events if e.object_id == cab.id]
+    assert kinds[0] == "absent", kinds
+    assert ("relocated" in kinds) == relocated, kinds
+    added = [e for e in events if e.kind == "added"]
+    if relocated:
+        assert not added and cab.status == "M"
+        assert np.hypot(*(cab.pose_xytheta[:2] - (6.6, 1.3))) < 0.1, cab.pose_xytheta
+    else:  # the face joins the map as a new object; the cabinet stays absent
+        assert len(added) == 1 and cab.status == "A"
