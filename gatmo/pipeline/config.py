@@ -47,7 +47,10 @@ def sim_stack_config():
     """The stack config the demo uses on simulated halls: the likelihood_field_prob model with
     sigma_hit 0.1 m (ROS's default likelihood_field weighs so flatly that the filter trails the
     robot by 0.15 m in a furniture hall), ROS 1's
-    laser weights (z_hit 0.95, z_rand 0.05) and odometry noise matched to the simulator's.
+    laser weights (z_hit 0.95, z_rand 0.05) and odometry noise matched to the simulator's
+    (Thrun's alphas 0.05 / 0.01 / 0.05 / 0.01, ``SimConfig.odom``; until 2026-11-27 alpha2 and
+    alpha4 were 0.05, which let the cloud's heading wander about 3x faster per metre than the
+    simulated wheels' and a moved piece in view pull it along: README, twentieth session).
     The initial pose is the simulator's true start, so the initial cloud is 0.1 m / 5 deg
     (std), not AMCL's 0.5 m / 15 deg for a pose clicked in a viewer: with this sharp model the
     first update collapsed a 0.5 m cloud onto a wrong place 0.9-1.9 m off in 8 of 20 runs of
@@ -58,8 +61,8 @@ def sim_stack_config():
     cfg = StackConfig()
     a = cfg.amcl
     for k, v in dict(laser_model="likelihood_field_prob", sigma_hit_m=0.1,
-                     z_hit=0.95, z_rand=0.05, alpha1=0.05, alpha2=0.05, alpha3=0.05,
-                     alpha4=0.05, update_min_d_m=0.1, update_min_a_rad=0.1, min_particles=500,
+                     z_hit=0.95, z_rand=0.05, alpha1=0.05, alpha2=0.01, alpha3=0.05,
+                     alpha4=0.01, update_min_d_m=0.1, update_min_a_rad=0.1, min_particles=500,
                      max_particles=3000, initial_cov_xx_m2=0.1**2, initial_cov_yy_m2=0.1**2,
                      initial_cov_aa_rad2=math.radians(5.0)**2).items():
         setattr(a, k, v)

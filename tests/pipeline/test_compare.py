@@ -110,3 +110,15 @@ def test_traces_keep_the_poses_gatmo_was_given(scen, tmp_path):
         assert 0.2 < trusted.mean() <= 1.0
         err = np.hypot(*(given[trusted, :2] - gt[trusted, :2]).T)
         assert np.median(err) < 0.1
+
+
+@pytest.mark.parametrize("preset", ["hall", "office"])
+def test_the_simulated_configuration_models_the_simulators_odometry_noise(preset):
+    # both localizers of a simulated compare assume the wheels' noise the simulator draws
+    # (Thrun's alphas): a filter whose heading may wander faster than the robot's lets a moved
+    # piece in view pull it along (README, twentieth session)
+    from gatmo.pipeline.config import sim_stack_config
+
+    amcl, odom = sim_stack_config().amcl, SimConfig.for_preset(preset).odom
+    assert [amcl.alpha1, amcl.alpha2, amcl.alpha3, amcl.alpha4] == [
+        odom.alpha1, odom.alpha2, odom.alpha3, odom.alpha4]
