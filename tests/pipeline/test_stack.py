@@ -270,6 +270,17 @@ def test_gatmo_waits_after_the_localizer_jumps():
     assert t[52:].all()
 
 
+@pytest.mark.parametrize(("settle_m", "first_trusted"), [(0.0, 0), (1.5, 15)])
+def test_gatmo_waits_after_a_runs_start_with_settle_after_start(settle_m, first_trusted):
+    """The filter's first updates from the initial cloud may settle confidently off (hall seed
+    416, run 3): with ``settle_after_start_m`` GATMO gets no trusted pose for that travel
+    (0.1 m per scan along ``_STRAIGHT``), counted from each run's start (``begin_run``)."""
+    t = _trusted_along_straight(_STRAIGHT, FusionConfig(align_to_map=False,
+                                                        settle_after_start_m=settle_m))
+    assert not t[:first_trusted].any()
+    assert t[first_trusted + 1:].all()
+
+
 @pytest.mark.parametrize("check", [True, False])
 def test_gatmo_waits_when_the_localizer_slides_away_from_odometry(check):
     """A confident filter sliding onto a look-alike place 3 cm per scan (no single jump):
