@@ -1250,13 +1250,8 @@ def test_an_absent_piece_seen_by_one_face_is_matched_at_the_run_end(to_absent, r
     # robot sees its old place empty (absent), then only its north face, from the north: too
     # little of its outline for a match while the track lasts. At the run's end that chair
     # relocates the cabinet (gatmo.match_gamma_to_absent) instead of joining as a new object
-    cfg = CFG.model_copy(update={"match_gamma_to_absent": to_absent})
-    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.7, 5.2)])
-    world = room_grid(12, 6, 0.05, boxes=[(6.0, 0.8, 7.2, 1.8)])
-    om = ObjectMap.from_grid(g, cfg)
-    cab = [o for o in om.objects if not o.structure][0]
-    m = GatmoMapper(om, g, cfg)
-    m.begin_run(1)
+    m, cab, world = _one_object((12, 6), (1.5, 4.2, 2.7, 5.2), [(6.0, 0.8, 7.2, 1.8)],
+                                match_gamma_to_absent=to_absent)
     path = [(x, 3.0, np.pi / 2) for x in np.linspace(1.2, 3.2, 20)]
     path += [(x, 3.6, -np.pi / 2) for x in np.linspace(5.9, 7.3, 25)]
     events = _drive(m, world, path, max_range_m=4.0, n_beams=181)
