@@ -76,6 +76,11 @@ def _diameter(points_xy: np.ndarray) -> float:
     return float(np.sqrt((d**2).sum(-1).max()))
 
 
+def _larger_than(diameter_m: float, o: MapObject) -> bool:
+    """What was seen, ``diameter_m`` across, is larger than object ``o`` (3 cells of slack)."""
+    return diameter_m > _diameter(o.shape_xy) + 3 * o.resolution_m
+
+
 def _footprint_shift_m(o: MapObject, pose_a: np.ndarray, pose_b: np.ndarray) -> float:
     """How far the object's footprint moves from ``pose_a`` to ``pose_b`` [m]: the Hausdorff
     distance between its cells at the two poses. A symmetric outline turned half a turn about
@@ -302,14 +307,14 @@ class GatmoMapper:
         # seen in an earlier run only and turned down then (gone again, coming and going) would
         # pass them with no ray at all (the Intel log cut in two added three such things)
         seen = [g for g in self.object_map.Gamma if g.id in self._gamma_this_run]
-        kept = [o for o in sorted(seen, key=lambda g: -len(g.shape_xy)) if self._stays(o)]
+        cells = {g.id: self._cells_if_stays(g) for g in seen}
+        kept = [g for g in sorted(seen, key=lambda g: -len(g.shape_xy))
+                if cells[g.id] is not None]
         if self.cfg.match_gamma_to_absent:
             kept = self._match_absent_to_gamma(kept, events)
         taken = self._grid.occupied.copy()  # the map, and what is added below
         for o in kept:
-            c = self._grid.world_to_cell(o.cells_world())
-            c = c[self._grid.in_bounds(c)]
-            cy, cx = c[:, 1], c[:, 0]
+            cy, cx = cells[o.id]
             if np.mean(taken[cy, cx]) > 0.3:
                 continue
             # beyond the paper: returns in space the static map never knew (through a window,
@@ -325,27 +330,28 @@ class GatmoMapper:
         self._rerender()
         return events
 
-    def _stays(self, o: MapObject) -> bool:
-        """A Gamma object seen this run is still there at the run's end: large enough, on the
-        map, not gone again, not coming and going (the end-of-run tests before it is added)."""
+    def _cells_if_stays(self, o: MapObject) -> tuple[np.ndarray, np.ndarray] | None:
+        """The grid cells (rows, columns) of a Gamma object seen this run if it is still there
+        at the run's end: large enough, on the map, not gone again, not coming and going (the
+        end-of-run tests before it is added); else None."""
         if len(o.shape_xy) < self.cfg.add_min_cells:
-            return False
+            return None
         c = self._grid.world_to_cell(o.cells_world())
         c = c[self._grid.in_bounds(c)]
         if not len(c):  # off the map
-            return False
+            return None
         cy, cx = c[:, 1], c[:, 0]
         # beyond the paper: where rays went on well past its cells after the last return
         # landed there, it has gone again (a person who stood a while, a cart wheeled off)
         if np.mean(self._passed[cy, cx] >= self.cfg.match_free_rays
                    ) > self.cfg.add_max_passed_fraction:
             self.counts["gamma_gone"] += 1
-            return False
+            return None
         flicker = self.flicker[o.id] = self._flicker(cy, cx)
         if flicker > self.cfg.add_max_flicker:
             self.counts["gamma_flicker"] += 1
-            return False
-        return True
+            return None
+        return cy, cx
 
     def _match_absent_to_gamma(self, kept: list[MapObject], events) -> list[MapObject]:
         """Beyond the paper, the other order of its "new absences with old chairs": an object
@@ -359,12 +365,11 @@ class GatmoMapper:
             if o.structure:
                 continue
             for g in kept:
-                if _diameter(g.shape_xy) > _diameter(o.shape_xy) + 3 * o.resolution_m:
+                if _larger_than(_diameter(g.shape_xy), o):
                     continue  # what was seen is larger than the object
-                mt = self._fit_gamma(g, o)
-                if mt is not None:
-                    key = _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta))
-                    fits.append((key, len(fits), o, g, mt))
+                fit = self._fit_gamma_ranked(g, o)
+                if fit is not None:
+                    fits.append((fit[0], len(fits), o, g, fit[1]))
         used: set[int] = set()
         for _, _, o, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
             if o.id in used or g.id in used:
@@ -705,7 +710,7 @@ class GatmoMapper:
         if len(keys) < max(c.chair_min_cells, c.match_min_edge_fraction * len(o.edge_xy)):
             return None
         pts = self._grid.cell_to_world(keys)
-        if _diameter(pts) > _diameter(o.shape_xy) + 3 * o.resolution_m:
+        if _larger_than(_diameter(pts), o):
             return None
         views = self._nudge_views.get(o.id, [])
         mt = self._match(pts, o, views)
@@ -1013,10 +1018,9 @@ class GatmoMapper:
                     fits.append((fit[0], len(fits), m, None, None))
         for g in self.object_map.Gamma:
             if g.id in self._gamma_this_run:  # seen in an earlier run only: no evidence
-                mt = self._fit_gamma(g, o)
-                if mt is not None:
-                    key = _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta))
-                    fits.append((key, len(fits), None, g, mt))
+                fit = self._fit_gamma_ranked(g, o)
+                if fit is not None:
+                    fits.append((fit[0], len(fits), None, g, fit[1]))
         for _, _, m, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
             if o.status != "A":
                 break
@@ -1169,7 +1173,7 @@ class GatmoMapper:
         pts, everything, diam_p = view
         if tier == -1 and m.n_obs < self.cfg.match_patience_scans:
             return "patience"  # a movable object seen nowhere yet: only once nothing absent fits
-        if diam_p > _diameter(o.shape_xy) + 3 * o.resolution_m:
+        if _larger_than(diam_p, o):
             return "larger"  # what is seen is larger than the object
         if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
             return "too_little"  # too little of the object seen yet to tell look-alikes apart
@@ -1266,7 +1270,7 @@ class GatmoMapper:
                     or any(lookalike(r, q, self.cfg.lookalike_tolerance) for q in shapes)):
                 continue
             shapes.append(r)
-            if diam_p > _diameter(r.shape_xy) + 3 * r.resolution_m:
+            if _larger_than(diam_p, r):
                 continue
             mr = self._match(pts, r, m.views)
             if mr.score < mt.score - self.cfg.match_ambiguity_margin:
@@ -1369,6 +1373,14 @@ class GatmoMapper:
         if mt.score >= self.cfg.match_min_score and self._free_consistent(o, mt):
             return mt
         return None
+
+    def _fit_gamma_ranked(self, g: MapObject, o: MapObject) -> tuple[tuple, object] | None:
+        """(:func:`_rank_key` as a tier-0 candidate, match) of ``o`` onto the Gamma object
+        ``g`` (:meth:`_fit_gamma`), or None."""
+        mt = self._fit_gamma(g, o)
+        if mt is None:
+            return None
+        return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
 
     def _far(self, o: MapObject, mt) -> bool:
         """The match ``mt`` puts ``o`` more than ``doubt_search_m`` from where it is."""
