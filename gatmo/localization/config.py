@@ -109,6 +109,16 @@ class AmclConfig(GatmoModel):
             "scans too, and must be able to recover). 0: off (AMCL)"
         ),
     )
+    explained_at: Literal["best_tenth", "prediction"] = Field(
+        "best_tenth",
+        description=(
+            "where min_explained_beam_fraction tests the beams: best_tenth, for the best tenth "
+            "of the particles; prediction, at the filter's estimate carried by odometry to "
+            "this scan (the pose it publishes without the update). A cloud that has grown "
+            "particles on a wrong alignment of old and new furniture has a best tenth that "
+            "explains the scan"
+        ),
+    )
     max_coast_m: float = Field(
         3.0, gt=0, description="longest odometry-only stretch min_explained_beam_fraction allows"
     )

@@ -194,8 +194,13 @@ class MonteCarloLocalizer:
             self.stats.map_region_updates += 1
 
     # ----------------------------------------------------------------- update
-    def update(self, odom_pose_xytheta, scan: Scan) -> PoseEstimate:
-        """Process one scan with the odometry pose (odom frame) at its stamp."""
+    def update(self, odom_pose_xytheta, scan: Scan,
+               withheld: np.ndarray | None = None) -> PoseEstimate:
+        """Process one scan with the odometry pose (odom frame) at its stamp.
+
+        ``withheld`` (B,) bool, optional: beams the caller set to NaN because the map cannot
+        explain them (furniture moved, people); ``min_explained_beam_fraction`` counts them as
+        unexplained beams."""
         c = self.cfg
         odom = np.asarray(odom_pose_xytheta, dtype=float)
         self.stats.scans += 1
@@ -228,8 +233,11 @@ class MonteCarloLocalizer:
             # the gate holds from a converged filter on, while it coasts (its cloud spreads on
             # odometry alone), up to max_coast_m
             gate = (self._converged or self._coast_m > 0.0) and self._coast_m < c.max_coast_m
+            predicted = _compose(self._est, _relative(self._odom_at_update, odom))
             logw, n_beams = self.sensor.weigh(moved, scan, self._converged,
-                                              gate_unexplained=gate)
+                                              gate_unexplained=gate,
+                                              predicted_xytheta=predicted,
+                                              withheld=withheld)
             unmapped = getattr(self.sensor, "last_unmapped_beams", 0)
             self.stats.unmapped_beams += unmapped
             if getattr(self.sensor, "last_gated", False):

@@ -287,11 +287,17 @@ class SensorModel:
                     g.resolution_m, ox, oy, c.z_hit, c.sigma_hit_m, rmax, MARCH_JUMP_MIN_CELLS)
 
     def weigh(self, particles: np.ndarray, scan: Scan, converged: bool,
-              gate_unexplained: bool = False) -> tuple[np.ndarray, int]:
+              gate_unexplained: bool = False,
+              predicted_xytheta: np.ndarray | None = None,
+              withheld: np.ndarray | None = None) -> tuple[np.ndarray, int]:
         """Log weights (N,) and the number of beams used (0: nothing to weigh).
         ``gate_unexplained``: apply ``min_explained_beam_fraction`` (the localizer asks for it
         once converged, and for at most ``max_coast_m`` of travel; ``last_gated`` says whether
-        it held the scan back; ``last_explained_fraction`` is the fraction measured)."""
+        it held the scan back; ``last_explained_fraction`` is the fraction measured).
+        ``predicted_xytheta`` (3,): the filter's estimate carried by odometry to this scan
+        [m, m, rad], map frame, where ``explained_at: prediction`` tests the beams.
+        ``withheld`` (B,) bool: beams the caller withheld as unexplained (set to NaN); the
+        gate counts those among the selected beams as unexplained."""
         from gatmo.localization import _kernels as K
 
         c = self.cfg
@@ -335,7 +341,19 @@ class SensorModel:
         if c.min_explained_beam_fraction > 0.0:
             ratio = c.z_hit * rmax / max(c.z_rand, 1e-12)
             d_max = c.sigma_hit_m * np.sqrt(2.0 * np.log(ratio)) if ratio > 1.0 else 0.0
-            self.last_explained_fraction = float(np.quantile((zs < d_max).mean(axis=1), 0.9))
+            if c.explained_at == "prediction" and predicted_xytheta is not None:
+                at = np.ascontiguousarray(np.reshape(predicted_xytheta, (1, 3)), dtype=np.float64)
+                _, zs_at = K.likelihood_field_prob_kernel(
+                    at, lp, ranges, angles, self.field.dist_m, g.resolution_m, ox, oy,
+                    self.field.max_dist_m, c.z_hit, c.z_rand, c.sigma_hit_m, rmax, use)
+                explained = float((zs_at[0] < d_max).sum())
+            else:
+                explained = float(np.quantile((zs < d_max).sum(axis=1), 0.9))
+            n_withheld = 0
+            if withheld is not None:
+                step = max(1, (scan.num_beams - 1) // max(c.max_beams - 1, 1))
+                n_withheld = int(np.count_nonzero(np.asarray(withheld, dtype=bool)[::step]))
+            self.last_explained_fraction = explained / (len(ranges) + n_withheld)
         if gate_unexplained and self.last_explained_fraction < c.min_explained_beam_fraction:
             self.last_gated = True
             return np.zeros(len(particles)), 0

@@ -395,7 +395,8 @@ class LocalizationStack:
         match = self.matcher.register(scan) if self.matcher is not None else None
         if match is not None and self.fusion.motion_from_matcher:
             scan = self._with_matcher_motion(scan, np.asarray(match.pose_xytheta, dtype=float))
-        est = self.localizer.update(scan.odom_pose_xytheta, self._masked(scan))
+        masked, withheld = self._masked(scan)
+        est = self.localizer.update(scan.odom_pose_xytheta, masked, withheld=withheld)
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)
         confident = is_confident(est, self.fusion)
         odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
@@ -591,12 +592,13 @@ class LocalizationStack:
         self._gatmo_last = (out.copy(), np.asarray(base_ref, dtype=float).copy())
         return out
 
-    def _masked(self, scan: Scan) -> Scan:
+    def _masked(self, scan: Scan) -> tuple[Scan, np.ndarray | None]:
         """The scan with the returns GATMO cannot explain set to NaN (``mask_unexplained``),
-        placed from the last localizer pose moved by odometry."""
+        placed from the last localizer pose moved by odometry, and which beams (B,) bool were
+        withheld (None: none)."""
         unexplained_at = getattr(self.mapper, "unexplained_at", None)
         if unexplained_at is None or not self.fusion.mask_unexplained:
-            return scan
+            return scan, None
         if self._last_loc is not None:
             odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
             pred = compose(self._last_loc, relative(self._last_odom, odom))
@@ -605,11 +607,11 @@ class LocalizationStack:
         elif self._start is not None:  # the run's first scan, from the initial pose
             pred, confident = self._start, True
         else:
-            return scan
+            return scan, None
         lp = compose(pred, scan.laser_pose_xytheta)
         valid = scan.valid
         if not valid.any():
-            return scan
+            return scan, None
         a = lp[2] + scan.angles_rad[valid]
         r = scan.ranges_m[valid]
         pts = lp[:2] + r[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
@@ -622,10 +624,12 @@ class LocalizationStack:
             bad |= self.mapper.beams_off_at(lp, scan)
         self.n_masked += int(bad.sum())
         if not bad.any():
-            return scan
+            return scan, None
+        withheld = np.zeros(scan.num_beams, dtype=bool)
+        withheld[np.nonzero(valid)[0][bad]] = True
         ranges = scan.ranges_m.copy()
-        ranges[np.nonzero(valid)[0][bad]] = np.nan
-        return replace(scan, ranges_m=ranges)
+        ranges[withheld] = np.nan
+        return replace(scan, ranges_m=ranges), withheld
 
     def end_run(self) -> list:
         """Close a log: GATMO adds dominant chairs in Gamma to the map (paper, Sec. V)."""

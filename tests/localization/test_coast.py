@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+import pytest
 
 from gatmo.localization import AmclConfig, MonteCarloLocalizer
 from gatmo.localization.sensor import SensorModel
@@ -121,3 +122,60 @@ def test_coasting_is_bounded():
     loc, _, _ = _run(_cfg(min_explained_beam_fraction=0.5, max_coast_m=10.0), scans, mapped)
     assert skipped_bounded < loc.stats.unexplained_skipped
 
+
+
+def _along_worlds():
+    """(real, mapped) as :func:`_worlds`, but in the map the boxes of x 8-13 stand 0.7 m further
+    along the route (east): a filter slid 0.7 m east explains the scans there."""
+    xs = np.arange(2.5, 17.0, 1.5)
+    real = room_grid(20, 10, RES, boxes=_boxes(xs))
+    moved = [(x0 + 0.7, y0, x1 + 0.7, y1) if 8.0 <= x0 <= 13.0 else (x0, y0, x1, y1)
+             for x0, y0, x1, y1 in _boxes(xs)]
+    return real, room_grid(20, 10, RES, boxes=moved)
+
+
+def test_explained_at_the_prediction_ignores_particles_on_a_wrong_alignment():
+    real, mapped = _along_worlds()
+    truth = np.array([11.0, ROUTE_Y, 0.0])
+    scan = make_scan(real, truth, n_beams=181, max_range_m=3.5)
+    rng = np.random.default_rng(1)
+    # most particles at the true pose, a fifth slid 0.7 m east onto the boxes' old places
+    parts = truth + rng.normal(0, [0.03, 0.03, 0.01], size=(200, 3))
+    parts[:40, 0] += 0.7
+    field = LikelihoodField(mapped.copy(), 2.0)
+    best = SensorModel(field, _cfg(min_explained_beam_fraction=0.5))
+    best.weigh(parts, scan, True, gate_unexplained=True)
+    assert best.last_explained_fraction > 0.5 and not best.last_gated
+    at = SensorModel(field, _cfg(min_explained_beam_fraction=0.5, explained_at="prediction"))
+    _, n = at.weigh(parts, scan, True, gate_unexplained=True, predicted_xytheta=truth)
+    assert at.last_explained_fraction < 0.2 and at.last_gated and n == 0
+    # at a place whose boxes the map has right, the prediction explains the scan
+    truth = np.array([4.5, ROUTE_Y, 0.0])
+    scan = make_scan(real, truth, n_beams=181, max_range_m=3.5)
+    _, n = at.weigh(truth + rng.normal(0, 0.03, size=(200, 3)), scan, True,
+                    gate_unexplained=True, predicted_xytheta=truth)
+    assert at.last_explained_fraction > 0.8 and not at.last_gated and n > 0
+
+
+def test_withheld_beams_count_as_unexplained():
+    real, mapped = _along_worlds()
+    truth = np.array([12.8, ROUTE_Y, 0.0])
+    scan = make_scan(real, truth, n_beams=181, max_range_m=3.5)
+    model = SensorModel(LikelihoodField(mapped.copy(), 2.0),
+                        _cfg(min_explained_beam_fraction=0.5, explained_at="prediction",
+                             max_beams=181))
+    # a caller (the full stack) withholds the returns of the boxes moved since the map was made
+    # (x < 14) as unexplained; those of the two boxes beyond are left
+    pts_x = truth[0] + scan.ranges_m * np.cos(scan.angles_rad)
+    withheld = scan.valid & (pts_x < 14.0)
+    kept = scan.valid & ~withheld
+    ranges = np.where(withheld, np.nan, scan.ranges_m)
+    masked = type(scan)(**{**scan.__dict__, "ranges_m": ranges})
+    parts = truth + np.random.default_rng(2).normal(0, 0.03, size=(100, 3))
+    model.weigh(parts, masked, True, gate_unexplained=True, predicted_xytheta=truth)
+    without = model.last_explained_fraction
+    assert without > 0.9 and not model.last_gated  # the returns left fit the map
+    model.weigh(parts, masked, True, gate_unexplained=True, predicted_xytheta=truth,
+                withheld=withheld)
+    assert model.last_explained_fraction == pytest.approx(without * kept.sum() / scan.valid.sum())
+    assert model.last_explained_fraction < 0.5 and model.last_gated

@@ -28,7 +28,7 @@ class ScriptedLocalizer:
         self.i = 0
         self.regions = []
 
-    def update(self, odom, scan):
+    def update(self, odom, scan, withheld=None):
         i = self.i
         self.i += 1
         std = 0.05 if i in self.confident_at else 0.6
@@ -339,9 +339,11 @@ class RecordingLocalizer(ScriptedLocalizer):
     def __init__(self, truth):
         super().__init__(truth, confident_at=range(len(truth)))
         self.scans = []
+        self.withheld = []
 
-    def update(self, odom, scan):
+    def update(self, odom, scan, withheld=None):
         self.scans.append(scan)
+        self.withheld.append(withheld)
         return super().update(odom, scan)
 
 
@@ -390,6 +392,12 @@ def test_returns_gatmo_cannot_explain_are_withheld_from_the_localizer():
         assert bool(np.isnan(last[on_box]).all()) == expect
         assert not np.isnan(last[~on_box]).any()
         assert (stack.n_masked > 0) == expect
+        # the localizer is told which beams were withheld (its unexplained-scan gate counts
+        # them as unexplained: amcl.min_explained_beam_fraction)
+        if expect:
+            assert np.array_equal(loc.withheld[-1], on_box)
+        else:
+            assert all(w is None for w in loc.withheld)
 
 
 def test_returns_near_a_doubted_object_are_withheld_with_mask_doubted():
@@ -439,7 +447,7 @@ class LooselyConfidentLocalizer(ScriptedLocalizer):
     """Position std 0.12 m: confident enough to reset the matcher (0.15 m), not for GATMO's
     strict test (0.1 m)."""
 
-    def update(self, odom, scan):
+    def update(self, odom, scan, withheld=None):
         i = self.i
         self.i += 1
         return Est(self.truth[i] + self.bias, np.diag([0.12**2, 0.12**2, 0.01**2]))
@@ -544,7 +552,7 @@ class CloudLocalizer(RecordingLocalizer):
         super().__init__(truth)
         self.std_m = std_m
 
-    def update(self, odom, scan):
+    def update(self, odom, scan, withheld=None):
         est = super().update(odom, scan)
         return Est(est.pose_xytheta, np.diag([self.std_m**2, self.std_m**2, 0.01**2]))
 
@@ -595,7 +603,7 @@ class OdomRecordingLocalizer(ScriptedLocalizer):
         super().__init__(truth, confident_at=[])
         self.odom = []
 
-    def update(self, odom, scan):
+    def update(self, odom, scan, withheld=None):
         self.odom.append(np.asarray(odom, dtype=float))
         return super().update(odom, scan)
 
