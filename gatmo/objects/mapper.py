@@ -451,6 +451,18 @@ class GatmoMapper:
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
 
+    def note_unexplained(self, pose_xytheta, scan: Scan) -> None:
+        """Count the returns of a scan laid from ``pose_xytheta`` (base, map frame) that the
+        current map does not explain (:meth:`unexplained_at`), and nothing else: a pose
+        carried by odometry alone is no evidence of absence, and feeds no track."""
+        lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
+        pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
+        _, explained = self._explained(pts)
+        cu = self._grid.world_to_cell(pts[~explained])
+        ok = self._grid.in_bounds(cu)
+        np.add.at(self._unexplained, (cu[ok, 1], cu[ok, 0]), 1)
+        self._unexplained_dilated = None
+
     def _fits_map(self, lp, scan: Scan, pts: np.ndarray, near_any: np.ndarray) -> float | str:
         """The map's test of the pose a scan is laid from (laser at ``lp``, returns ``pts``
         (N, 2), ``near_any`` from :meth:`_explained`): the fraction of the beams the map

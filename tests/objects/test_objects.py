@@ -1266,3 +1266,24 @@ def test_an_absent_piece_seen_by_one_face_is_matched_at_the_run_end(to_absent, r
         assert np.hypot(*(cab.pose_xytheta[:2] - (6.6, 1.3))) < 0.1, cab.pose_xytheta
     else:  # the face joins the map as a new object; the cabinet stays absent
         assert len(added) == 1 and cab.status == "A"
+
+
+def test_note_unexplained_counts_returns_and_nothing_else():
+    """A scan laid from a pose odometry carried (the stack coasting) counts where returns are
+    unexplained, so the stack keeps withholding them, but feeds no track and is no evidence
+    that the map's objects are gone."""
+    column = (3.0, 3.5, 3.3, 3.8)
+    grid = room_grid(8, 6, 0.05, boxes=[column])
+    world = room_grid(8, 6, 0.05, boxes=[(4.0, 2.2, 4.4, 2.6)])  # the column gone, a box new
+    pose = np.array([1.5, 2.4, 0.0])
+    scan = make_scan(world, pose, n_beams=181, max_range_m=6.0)
+    m = GatmoMapper.from_config(GatmoConfig(), grid)
+    m.begin_run(1)
+    box = np.array([[4.0, 2.4]])
+    for _ in range(2):
+        m.note_unexplained(pose, scan)
+    assert m.unexplained_at(box)[0]
+    assert not m.unexplained_at(np.array([[1.0, 1.0]]))[0]
+    assert m._meta == [] and m.counts["updates"] == 0
+    (col,) = [o for o in m.object_map.objects if o.status == "U" and not o.structure]
+    assert m.absence_evidence(col.id)["beams_through"] == 0

@@ -647,3 +647,52 @@ def test_the_localizer_can_take_its_motion_from_the_scan_matcher(from_matcher):
         np.testing.assert_allclose(got, wheel if not from_matcher or slipped else true,
                                    atol=1e-9)
     assert stack.n_matcher_motion_rejected == (2 if from_matcher else 0)
+
+
+def _coast_world():
+    """(map, world, truth): a 20 x 10 m hall whose walls are beyond a 3 m laser's reach from
+    the route (y 5, heading east), a partition the map has 1.5 m north of it and a long
+    cabinet it does not have straight ahead: most of what the robot sees is furniture the map
+    does not explain."""
+    partition = (6.0, 6.5, 13.0, 6.6)
+    grid = room_grid(20, 10, 0.05, boxes=[partition])
+    world = room_grid(20, 10, 0.05, boxes=[partition, (9.6, 2.5, 10.0, 6.3)])
+    truth = np.array([[7.0 + 0.04 * i, 5.0, 0.0] for i in range(30)])
+    return grid, world, truth
+
+
+def test_a_scan_gatmo_withholds_mostly_is_handed_to_the_localizer_empty():
+    """``coast_withheld_fraction``: once GATMO has seen the box's returns unexplained, a scan
+    of which it withholds most returns reaches the localizer with none (the particles move on
+    odometry alone), for at most ``coast_max_m`` of travel in a row; meanwhile the coasted
+    scans still count where returns are unexplained."""
+    from gatmo.objects import GatmoConfig, GatmoMapper
+
+    grid, world, truth = _coast_world()
+    scans = [make_scan(world, p, n_beams=181, max_range_m=3.0, odom_pose_xytheta=p,
+                       stamp_s=0.1 * i) for i, p in enumerate(truth)]
+    box_pt = np.array([[9.6, 5.0]])
+    got = {}
+    for frac, coast_max in ((0.0, 3.0), (0.5, 3.0), (0.5, 0.3)):
+        loc = RecordingLocalizer(truth)
+        mapper = GatmoMapper.from_config(GatmoConfig(provisional_landmarks=False), grid)
+        stack = LocalizationStack(loc, None, mapper, FusionConfig(
+            align_to_map=False, coast_withheld_fraction=frac, coast_max_m=coast_max))
+        stack.begin_run(1)
+        for s in scans:
+            stack.step(s)
+        empty = np.array([not np.isfinite(s.ranges_m).any() for s in loc.scans])
+        withheld = np.array([0 if w is None else int(w.sum()) for w in loc.withheld])
+        kept = np.array([int(s.valid.sum()) for s in loc.scans])
+        got[(frac, coast_max)] = (empty, withheld, kept, stack.n_coasted)
+        assert mapper.unexplained_at(box_pt)[0]
+    empty, withheld, kept, n = got[(0.0, 3.0)]
+    # without the option the column's returns always reach the localizer, the box's are
+    # withheld once seen unexplained
+    assert n == 0 and not empty.any() and (kept > 0).all()
+    assert (withheld[5:] > kept[5:]).all()
+    empty, withheld, kept, n = got[(0.5, 3.0)]
+    assert n == empty.sum() >= 20 and empty[5:].all() and not empty[:2].any()
+    # bounded: after 0.3 m coasted (8 scans of 4 cm), the scans are weighed again
+    empty, withheld, kept, n = got[(0.5, 0.3)]
+    assert 6 <= n <= 10 and empty[2:8].any() and not empty[-10:].any()
