@@ -116,7 +116,10 @@ class AmclConfig(GatmoModel):
             "of the particles; prediction, at the filter's estimate carried by odometry to "
             "this scan (the pose it publishes without the update). A cloud that has grown "
             "particles on a wrong alignment of old and new furniture has a best tenth that "
-            "explains the scan"
+            "explains the scan. Measured on tuning hall seeds 300-305 (2026-11-27, threshold "
+            "0.5, both localizers): the full stack's ATE 0.149 -> 0.43 m; a filter already "
+            "0.7 m off, confident, sees every scan unexplained at its prediction and coasts "
+            "where weighing would have brought it back"
         ),
     )
     max_coast_m: float = Field(
