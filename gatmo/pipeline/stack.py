@@ -133,8 +133,8 @@ class FusionConfig(GatmoModel):
     nothing else within the 4 m laser's reach), the few returns left fit an alignment of old
     and new furniture and the filter slides along the path; an up-to-date map of the last
     run's layout does not prevent it (the static localizer on it: 1.0 m ATE). Off: on tuning
-    hall seeds 300-319 it changes the full stack's mean ATE 0.150 -> 0.162 m at 0.6 (0.151 m
-    at 0.7, 18 seeds); seed 301 is lost at 0.5 (3.6 m); and the demo's run 4 replayed with the
+    hall seeds 300-319 it changes the full stack's mean ATE 0.150 -> 0.162 m at 0.6 (0.149 m
+    at 0.7, with 4 more false relocations); seed 301 is lost at 0.5 (3.6 m); and the demo's run 4 replayed with the
     compare's filter seed stays lost: coasting holds the filter for 1.4 m, then returns the
     masks do not know yet pull it (docs/experiments.md, twenty-first session).
 
