@@ -19,6 +19,7 @@ Only numpy and gatmo's algorithm types are used here; files are the business of
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -134,9 +135,10 @@ class FusionConfig(GatmoModel):
     and new furniture and the filter slides along the path; an up-to-date map of the last
     run's layout does not prevent it (the static localizer on it: 1.0 m ATE). Off: on tuning
     hall seeds 300-319 it changes the full stack's mean ATE 0.150 -> 0.162 m at 0.6 (0.149 m
-    at 0.7, with 4 more false relocations); seed 301 is lost at 0.5 (3.6 m); and the demo's run 4 replayed with the
-    compare's filter seed stays lost: coasting holds the filter for 1.4 m, then returns the
-    masks do not know yet pull it (docs/experiments.md, twenty-first session).
+    at 0.7, with 4 more false relocations); seed 301 is lost at 0.5 (3.6 m); and the demo's
+    run 4 replayed with the compare's filter seed stays lost: coasting holds the filter for
+    1.4 m, then returns the masks do not know yet pull it (docs/experiments.md, twenty-first
+    session).
 
     ``bridge_evidence`` (beyond the paper): the scans between two poses GATMO was handed as
     confirmed (``pose_verified``) that it was not, or only unconfirmed, are kept; when the
@@ -319,7 +321,7 @@ class LocalizationStack:
 
     Args:
         localizer: a :class:`gatmo.localization.mcl.MonteCarloLocalizer` (or anything with
-            ``update(odom_pose_xytheta, scan, withheld=None) -> PoseEstimate`` and
+            ``update(odom_pose_xytheta, scan[, withheld]) -> PoseEstimate`` and
             ``update_map_region(cells_new, ix0, iy0)``).
         matcher: a scan matcher with ``register(scan) -> MatchResult`` whose ``pose_xytheta`` is
             the base pose in the matcher's own frame, or None (localizer pose published as is).
@@ -356,6 +358,14 @@ class LocalizationStack:
         self._bridge: list[tuple[Scan, np.ndarray, bool]] = []
         self._bridge_travel_m = 0.0
         self.n_bridged = 0  # scans handed to GATMO through a bridge
+        # a localizer without the ``withheld`` argument (an older stand-in) gets the masked
+        # scan alone
+        try:
+            params = inspect.signature(getattr(localizer, "update", None)).parameters
+            self._takes_withheld = "withheld" in params or any(
+                p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+        except (TypeError, ValueError):  # no update (a stand-in stepped otherwise)
+            self._takes_withheld = False
         self._coast_m = 0.0  # coast_withheld_fraction: travel coasted in a row [m]
         self._coast_odom: np.ndarray | None = None
         self.n_coasted = 0
@@ -419,7 +429,10 @@ class LocalizationStack:
         coasting = self._coasting(scan, masked, withheld)
         if coasting is not None:
             masked = coasting
-        est = self.localizer.update(scan.odom_pose_xytheta, masked, withheld=withheld)
+        if self._takes_withheld:
+            est = self.localizer.update(scan.odom_pose_xytheta, masked, withheld=withheld)
+        else:
+            est = self.localizer.update(scan.odom_pose_xytheta, masked)
         if coasting is not None and self.mapper is not None:
             self.mapper.note_unexplained(est.pose_xytheta, scan)
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)

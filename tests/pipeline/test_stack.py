@@ -400,6 +400,35 @@ def test_returns_gatmo_cannot_explain_are_withheld_from_the_localizer():
             assert all(w is None for w in loc.withheld)
 
 
+def test_a_localizer_without_the_withheld_argument_gets_the_masked_scan():
+    """A stand-in localizer written before ``update`` took ``withheld`` still works: it is
+    handed the masked scan alone."""
+    from gatmo.objects import GatmoConfig, GatmoMapper
+
+    grid = room_grid(8, 5, 0.05)
+    world = room_grid(8, 5, 0.05, boxes=[(4.0, 2.2, 4.4, 2.6)])
+    truth = np.array([[1.5 + 0.02 * i, 2.4, 0.0] for i in range(12)])
+    scans = [make_scan(world, p, n_beams=181, max_range_m=6.0, odom_pose_xytheta=p,
+                       stamp_s=0.1 * i) for i, p in enumerate(truth)]
+
+    class OldLocalizer(ScriptedLocalizer):
+        def __init__(self, truth):
+            super().__init__(truth, confident_at=range(len(truth)))
+            self.scans = []
+
+        def update(self, odom, scan):  # no withheld
+            self.scans.append(scan)
+            return super().update(odom, scan)
+
+    loc = OldLocalizer(truth)
+    mapper = GatmoMapper.from_config(GatmoConfig(provisional_landmarks=False), grid)
+    stack = LocalizationStack(loc, None, mapper, FusionConfig(align_to_map=False))
+    stack.begin_run(1)
+    for s in scans:
+        stack.step(s)
+    assert stack.n_masked > 0 and np.isnan(loc.scans[-1].ranges_m).any()
+
+
 def test_returns_near_a_doubted_object_are_withheld_with_mask_doubted():
     """A box shifted 0.3 m: once beams pass through its old place GATMO doubts it, and with
     ``mask_doubted`` the returns landing near its old place (its shifted front) are withheld
