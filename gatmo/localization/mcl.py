@@ -233,7 +233,8 @@ class MonteCarloLocalizer:
             # the gate holds from a converged filter on, while it coasts (its cloud spreads on
             # odometry alone), up to max_coast_m
             gate = (self._converged or self._coast_m > 0.0) and self._coast_m < c.max_coast_m
-            predicted = _compose(self._est, _relative(self._odom_at_update, odom))
+            predicted = (_compose(self._est, _relative(self._odom_at_update, odom))
+                         if c.explained_at == "prediction" else None)
             logw, n_beams = self.sensor.weigh(moved, scan, self._converged,
                                               gate_unexplained=gate,
                                               predicted_xytheta=predicted,

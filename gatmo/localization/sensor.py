@@ -30,6 +30,11 @@ def segment_weights(ranges_m: np.ndarray, angles_rad: np.ndarray, jump_m: float,
     return np.minimum(1.0, max_beams / n[seg])
 
 
+def beam_step(num_beams: int, max_beams: int) -> int:
+    """AMCL's beam subsampling step: every step-th beam is used."""
+    return max(1, (num_beams - 1) // max(max_beams - 1, 1))
+
+
 def select_beams(scan: Scan, max_beams: int, range_min_m: float | None,
                  range_max_m: float | None, keep_max_range: bool):
     """AMCL's beam subsampling (step = (n - 1) // (max_beams - 1)) and range gating.
@@ -41,8 +46,7 @@ def select_beams(scan: Scan, max_beams: int, range_min_m: float | None,
     rmax = float(range_max_m if range_max_m is not None else scan.range_max_m)
     rmin = float(range_min_m if range_min_m is not None else scan.range_min_m)
     n = scan.num_beams
-    step = max(1, (n - 1) // max(max_beams - 1, 1))
-    idx = np.arange(0, n, step)
+    idx = np.arange(0, n, beam_step(n, max_beams))
     r = scan.ranges_m[idx].copy()
     a = scan.angles_rad[idx]
     with np.errstate(invalid="ignore"):
@@ -351,7 +355,7 @@ class SensorModel:
                 explained = float(np.quantile((zs < d_max).sum(axis=1), 0.9))
             n_withheld = 0
             if withheld is not None:
-                step = max(1, (scan.num_beams - 1) // max(c.max_beams - 1, 1))
+                step = beam_step(scan.num_beams, c.max_beams)
                 n_withheld = int(np.count_nonzero(np.asarray(withheld, dtype=bool)[::step]))
             self.last_explained_fraction = explained / (len(ranges) + n_withheld)
         if gate_unexplained and self.last_explained_fraction < c.min_explained_beam_fraction:

@@ -422,10 +422,7 @@ class GatmoMapper:
         if events:  # the map changed: explain against the new one
             near_any, explained = self._explained(pts)
         un = pts[~explained]
-        cu = self._grid.world_to_cell(un)
-        ok = self._grid.in_bounds(cu)
-        np.add.at(self._unexplained, (cu[ok, 1], cu[ok, 0]), 1)
-        self._unexplained_dilated = None
+        self._count_unexplained(un)
         # beyond the paper: a long-range laser's far returns are a beam every 0.2-0.3 m; a
         # person 15 m away makes a 'chair' that matches any small absent object. And only
         # returns well inside the laser's range are tracked: an object cut by the range limit
@@ -458,7 +455,11 @@ class GatmoMapper:
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
         _, explained = self._explained(pts)
-        cu = self._grid.world_to_cell(pts[~explained])
+        self._count_unexplained(pts[~explained])
+
+    def _count_unexplained(self, points_xy: np.ndarray) -> None:
+        """Add map-frame returns (N, 2) the map does not explain to this run's counts."""
+        cu = self._grid.world_to_cell(points_xy)
         ok = self._grid.in_bounds(cu)
         np.add.at(self._unexplained, (cu[ok, 1], cu[ok, 0]), 1)
         self._unexplained_dilated = None

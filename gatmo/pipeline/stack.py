@@ -367,7 +367,6 @@ class LocalizationStack:
         except (TypeError, ValueError):  # no update (a stand-in stepped otherwise)
             self._takes_withheld = False
         self._coast_m = 0.0  # coast_withheld_fraction: travel coasted in a row [m]
-        self._coast_odom: np.ndarray | None = None
         self.n_coasted = 0
 
     def begin_run(self, run_id: int) -> None:
@@ -388,7 +387,7 @@ class LocalizationStack:
             if is_confident(SimpleNamespace(cov=cov0), self.fusion):
                 self._start = np.asarray(pose0, dtype=float)
         self._settle_left_m = self.fusion.settle_after_start_m
-        self._coast_m, self._coast_odom = 0.0, None  # a new log's odometry frame
+        self._coast_m = 0.0
         self._gatmo_last = None
         self._anchor, self._bridge, self._bridge_travel_m = None, [], 0.0
         self._injected_seen = _injected(self.localizer)
@@ -636,9 +635,8 @@ class LocalizationStack:
         odometry alone), for at most ``coast_max_m`` of travel in a row."""
         f = self.fusion
         odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
-        step = 0.0 if self._coast_odom is None else float(
-            np.hypot(*relative(self._coast_odom, odom)[:2]))
-        self._coast_odom = odom
+        step = 0.0 if self._last_odom is None else float(
+            np.hypot(*relative(self._last_odom, odom)[:2]))
         if f.coast_withheld_fraction <= 0.0 or withheld is None:
             self._coast_m = 0.0
             return None
