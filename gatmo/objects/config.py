@@ -221,6 +221,16 @@ class GatmoConfig(GatmoModel):
         "passed the matching tests while its track lasted (often too little seen: one face "
         "of a large piece) and is still there relocates an absent object it fits (score, free "
         "space, not larger) instead of joining the map as a new object; best fits first")
+    match_absence_to_gamma: bool = Field(
+        True, description="the paper's order-free matching, one way: an object found absent "
+        "is matched to the Gamma objects seen this run (chairs whose tracks ended unmatched)")
+    match_gamma_strict: bool = Field(
+        False, description="beyond the paper: an object found absent takes a Gamma object "
+        "seen this run only if it passes the tests a track's chair must pass that need no "
+        "views: not larger than the object, enough of it seen (match_min_edge_fraction), and no "
+        "different-looking object that fits nearly as well (match_ambiguity_margin). Without "
+        "it that path skips them, and a chair refused by them while its track lasted could "
+        "take the object afterwards")
     add_max_passed_fraction: float = Field(
         0.5, ge=0, le=1, description="of a new object's cells, the fraction rays may have "
         "passed (match_free_rays of them, going on add_gone_beyond_m or more) since a return "

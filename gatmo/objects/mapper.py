@@ -1029,9 +1029,9 @@ class GatmoMapper:
                 fit = None if view is None else self._fit(m, o, 0, view)
                 if fit is not None:
                     fits.append((fit[0], len(fits), m, None, None))
-        for g in self.object_map.Gamma:
+        for g in self.object_map.Gamma if self.cfg.match_absence_to_gamma else []:
             if g.id in self._gamma_this_run:  # seen in an earlier run only: no evidence
-                fit = self._fit_gamma_ranked(g, o)
+                fit = self._fit_gamma_ranked(g, o, strict=self.cfg.match_gamma_strict)
                 if fit is not None:
                     fits.append((fit[0], len(fits), None, g, fit[1]))
         for _, _, m, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
@@ -1263,14 +1263,16 @@ class GatmoMapper:
         """``o`` was seen standing at its place this run (and is not in doubt)."""
         return self._hits.get(o.id, 0) >= self.cfg.confirm_min_beams and o.id not in self._doubt
 
-    def _ambiguous(self, m: Metaobject, o: MapObject, mt,
+    def _ambiguous(self, m: Metaobject | None, o: MapObject, mt,
                    view: tuple[np.ndarray, np.ndarray, float]) -> bool:
         """Beyond the paper: the chair of track ``m``, matched to ``o`` at ``mt``, fits an
         object that does not look like ``o`` and could be it (furniture not seen at its place
         this run, candidate or not) nearly as well: within ``match_ambiguity_margin``, not
         larger than it, free space and beams consistent there. What is seen of it does not
         yet tell the two apart (a corner of a lounge chair is a corner of a cabinet). With
-        ``match_ambiguity_rivals: movable`` only objects known to move count as rivals."""
+        ``match_ambiguity_rivals: movable`` only objects known to move count as rivals.
+        ``m`` None: ``view`` holds a Gamma object's cells, free space is judged on the run's
+        rays and beams are not checked (no views)."""
         pts, _, diam_p = view
         shapes: list[MapObject] = [o]
         for r in self.object_map.objects:
@@ -1285,12 +1287,14 @@ class GatmoMapper:
             shapes.append(r)
             if _larger_than(diam_p, r):
                 continue
-            mr = self._match(pts, r, m.views)
+            views = None if m is None else m.views
+            mr = self._match(pts, r, views)
             if mr.score < mt.score - self.cfg.match_ambiguity_margin:
                 continue
-            if not self._free_ok(r, mr, m.views):
+            if not self._free_ok(r, mr, views):
                 continue
-            if self.cfg.match_beam_check and not self._beams_consistent(r, mr, m):
+            if (m is not None and self.cfg.match_beam_check
+                    and not self._beams_consistent(r, mr, m)):
                 continue
             self.counts["ambiguous"] += 1
             return True
@@ -1387,11 +1391,20 @@ class GatmoMapper:
             return mt
         return None
 
-    def _fit_gamma_ranked(self, g: MapObject, o: MapObject) -> tuple[tuple, object] | None:
+    def _fit_gamma_ranked(self, g: MapObject, o: MapObject,
+                          strict: bool = False) -> tuple[tuple, object] | None:
         """(:func:`_rank_key` as a tier-0 candidate, match) of ``o`` onto the Gamma object
-        ``g`` (:meth:`_fit_gamma`), or None."""
+        ``g`` (:meth:`_fit_gamma`), or None. ``strict`` (``match_gamma_strict``): also the
+        track tests that need no views: not larger, not too little of ``o`` seen, not
+        ambiguous (:meth:`_ambiguous`)."""
+        pts = g.cells_world()
+        if strict and (_larger_than(_diameter(pts), o)
+                       or len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy)):
+            return None
         mt = self._fit_gamma(g, o)
         if mt is None:
+            return None
+        if strict and self._ambiguous(None, o, mt, (pts, pts, _diameter(pts))):
             return None
         return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
 

@@ -1287,3 +1287,48 @@ def test_note_unexplained_counts_returns_and_nothing_else():
     assert m._meta == [] and m.counts["updates"] == 0
     (col,) = [o for o in m.object_map.objects if o.status == "U" and not o.structure]
     assert m.absence_evidence(col.id)["beams_through"] == 0
+
+
+def _corner_gamma(m, corner_xy, leg_m):
+    """A Gamma object seen this run: the two legs (``leg_m`` each) of a square's corner at
+    ``corner_xy``, as a track's chair cells leave it when the robot saw one corner only."""
+    from gatmo.objects.objectmap import MapObject
+
+    t = np.arange(0.0, leg_m + 1e-9, 0.05)
+    pts = np.vstack([np.c_[corner_xy[0] + t, np.full_like(t, corner_xy[1])],
+                     np.c_[np.full_like(t, corner_xy[0]), corner_xy[1] + t]])
+    shape, edge, pose = shape_from_points(pts, 0.05)
+    g = MapObject(m.object_map.next_id, None, "Gamma", pose, shape, edge, resolution_m=0.05)
+    m.object_map.next_id += 1
+    m.object_map.objects.append(g)
+    m._gamma_this_run.add(g.id)
+    return g
+
+
+@pytest.mark.parametrize(("to_gamma", "strict", "relocated"),
+                         [(True, False, True), (True, True, False), (False, False, False)])
+def test_an_absence_takes_a_gamma_corner_only_if_no_other_shape_fits_it(to_gamma, strict,
+                                                                         relocated):
+    """A cabinet (0.9 x 0.45 m) is found absent while a Gamma object seen this run holds the
+    corner of something: two 0.45 m legs. They fit the cabinet's corner, and just as well the
+    corner of a 0.7 m square standing elsewhere, not seen this run. The paper's order-free
+    matching takes the cabinet there; with ``match_gamma_strict`` the square makes it
+    ambiguous (as it would a track's chair) and the cabinet stays absent; with
+    ``match_absence_to_gamma`` off the path is closed."""
+    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.4, 4.65), (9.0, 4.0, 9.7, 4.7)])
+    om = ObjectMap.from_grid(g, CFG)
+    cab = min((o for o in om.objects if not o.structure), key=lambda o: o.pose_xytheta[0])
+    m = GatmoMapper(om, g, CFG.model_copy(update={"match_absence_to_gamma": to_gamma,
+                                                  "match_gamma_strict": strict}))
+    m.begin_run(1)
+    gam = _corner_gamma(m, (5.0, 1.0), 0.45)
+    events: list = []
+    m._mark_absent(cab, 1.0, events)
+    kinds = [e.kind for e in events if e.object_id == cab.id]
+    assert kinds[0] == "absent"
+    assert ("relocated" in kinds) == relocated, kinds
+    assert (gam in m.object_map.objects) == (not relocated)
+    assert (m.counts["ambiguous"] > 0) == strict  # refused as ambiguous, not as too little
+    if relocated:  # the cabinet's corner on the seen corner
+        corner = transform_points(cab.pose_xytheta, cab.shape_xy)
+        assert np.min(np.hypot(*(corner - (5.0, 1.0)).T)) < 0.08
