@@ -141,6 +141,13 @@ class GatmoConfig(GatmoModel):
     match_ambiguity_settle: bool = Field(
         True, description="a chair whose match waited on ambiguity and that leaves (not seen "
         "for tau_memory, or the run ends) takes its best match then, as without the wait")
+    match_settle_min_edge_fraction: float = Field(
+        0.3, ge=0, description="beyond the paper: a match settled as the track leaves "
+        "(match_ambiguity_settle) needs this many chair cells per edge cell of the object; "
+        "at the default, match_min_edge_fraction's value, no more than any match. A chair "
+        "still ambiguous when it leaves was most often seen in part (full stack, tuning hall "
+        "seeds 300-315: settled matches seeing at least 0.8 of the outline 5 right, 0 wrong; "
+        "below it 4 right, 8 wrong, 2 onto an identical piece)")
     match_free_first: bool = Field(
         True, description="beyond the paper: of the alignments a partial view allows, the best "
         "that covers no space seen free (else the best, then refused)")

@@ -135,7 +135,7 @@ class GatmoMapper:
                        "skipped_disagreement": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
                        "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0,
-                       "absent_to_gamma": 0}
+                       "absent_to_gamma": 0, "settle_refused": 0}
         self._ms: list[float] = []
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
@@ -1236,6 +1236,9 @@ class GatmoMapper:
         if best is None:
             return False
         _, o, mt = best
+        if settle and len(view[0]) < self.cfg.match_settle_min_edge_fraction * len(o.edge_xy):
+            self.counts["settle_refused"] += 1  # still ambiguous, and too little of it seen
+            return False
         if (self.cfg.match_ambiguity_wait and not settle
                 and m.n_obs < self.cfg.match_ambiguity_patience_scans
                 and self._ambiguous(m, o, mt, view)):

@@ -138,23 +138,26 @@ def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, re
     assert (("relocated", box.id) in kinds) == relocated
 
 
-@pytest.mark.parametrize(("wait", "settle", "rivals", "n_desk", "relocated"), [
-    (False, False, "unseen", 60, True), (True, False, "unseen", 60, False),
-    (True, True, "unseen", 60, False), (False, False, "unseen", 40, True),
-    (True, False, "unseen", 40, False), (True, True, "unseen", 40, True),
-    (True, False, "movable", 60, True)])
+@pytest.mark.parametrize(("wait", "settle", "rivals", "n_desk", "relocated", "settle_frac"), [
+    (False, False, "unseen", 60, True, 0.3), (True, False, "unseen", 60, False, 0.3),
+    (True, True, "unseen", 60, False, 0.3), (False, False, "unseen", 40, True, 0.3),
+    (True, False, "unseen", 40, False, 0.3), (True, True, "unseen", 40, True, 0.3),
+    (True, True, "unseen", 40, False, 0.8), (True, False, "movable", 60, True, 0.3)])
 def test_a_chair_that_fits_an_unseen_piece_of_another_shape_waits(wait, settle, rivals, n_desk,
-                                                                  relocated):
+                                                                  relocated, settle_frac):
     # as above, tracked up to the range limit (the ring test cannot refuse), but the desk is in
     # the map too, at a place out of the robot's sight: what is seen of it fits the desk as
     # well as the absent box, so with the ambiguity wait the box is not relocated onto it.
     # Driving on (60 scans of the desk) shows more of the desk than the box could be, and
     # nothing is relocated even with match_ambiguity_settle; stopping after 40, it is still
     # ambiguous when the run ends, and settling takes the match then (as without the wait).
-    # A desk that never moved is no rival with match_ambiguity_rivals: movable
+    # A desk that never moved is no rival with match_ambiguity_rivals: movable. Settling
+    # needs match_settle_min_edge_fraction of the box's outline seen: the desk's near half,
+    # 0.4 of it in chair cells, passes 0.3 (the default) and not 0.8
     cfg = CFG.model_copy(update={"track_range_margin_m": 0.0, "match_ambiguity_wait": wait,
                                  "match_ambiguity_patience_scans": 100,
                                  "match_ambiguity_settle": settle,
+                                 "match_settle_min_edge_fraction": settle_frac,
                                  "match_ambiguity_rivals": rivals})
     g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
     world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
@@ -168,6 +171,7 @@ def test_a_chair_that_fits_an_unseen_piece_of_another_shape_waits(wait, settle, 
     kinds += [(e.kind, e.object_id) for e in m.end_run()]
     assert (("relocated", box.id) in kinds) == relocated, kinds
     assert (m.counts["ambiguous"] > 0) == (wait and rivals == "unseen")
+    assert (m.counts["settle_refused"] > 0) == (settle_frac > 0.3 and settle and n_desk == 40)
 
 
 @pytest.mark.parametrize("verified, added", [(False, False), (True, True)])
