@@ -1277,6 +1277,7 @@ class GatmoMapper:
         ``m`` None: ``view`` holds a Gamma object's cells, free space is judged on the run's
         rays and beams are not checked (no views)."""
         pts, _, diam_p = view
+        views = None if m is None else m.views
         shapes: list[MapObject] = [o]
         for r in self.object_map.objects:
             movable = r.status in ("M", "A") or r.id in self._doubt
@@ -1290,7 +1291,6 @@ class GatmoMapper:
             shapes.append(r)
             if _larger_than(diam_p, r):
                 continue
-            views = None if m is None else m.views
             mr = self._match(pts, r, views)
             if mr.score < mt.score - self.cfg.match_ambiguity_margin:
                 continue
