@@ -1400,14 +1400,16 @@ class GatmoMapper:
         ``g`` (:meth:`_fit_gamma`), or None. ``strict`` (``match_gamma_strict``): also the
         track tests that need no views: not larger, not too little of ``o`` seen, not
         ambiguous (:meth:`_ambiguous`)."""
-        pts = g.cells_world()
-        if strict and (_larger_than(_diameter(pts), o)
-                       or len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy)):
-            return None
+        if strict:
+            pts = g.cells_world()
+            view = (pts, pts, _diameter(pts))
+            if (_larger_than(view[2], o)
+                    or len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy)):
+                return None
         mt = self._fit_gamma(g, o)
         if mt is None:
             return None
-        if strict and self._ambiguous(None, o, mt, (pts, pts, _diameter(pts))):
+        if strict and self._ambiguous(None, o, mt, view):
             return None
         return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
 
