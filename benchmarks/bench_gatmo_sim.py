@@ -95,9 +95,10 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     is right, the identity swapped); wrong: its object relocated elsewhere; absent: noticed
     gone, not found; missed), whether the robot could have found it (``observed``: both its
     old place seen through and its new place seen, from the true poses: "both", "old", "new",
-    "none"), and for relocations the scan index at which it happened."""
+    "none"), for relocations the scan index at which it happened, and the evidence GATMO had
+    of it (:func:`piece_evidence`)."""
     from gatmo.maps.object_io import load_objects
-    from gatmo.pipeline.evaluate import observed, piece_outcome, tie_objects
+    from gatmo.pipeline.evaluate import observed, piece_outcome, piece_views, tie_objects
     from gatmo.pipeline.runs import load_scans
 
     doc = json.loads(Path(scen.scenario_json).read_text())
@@ -110,7 +111,9 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
         om = load_objects(folders[k] / "objects.json")
         ties = tie_objects(om, doc)
         p2o = {v: o for o, v in ties.items()}
-        events = res.traces[(k, "gatmo")].events
+        trace = res.traces[(k, "gatmo")]
+        events = trace.events
+        gt = np.array([sc.gt_pose_xytheta for sc in scans])
         for c in run["changes"]:
             if c["kind"] not in ("moved", "shifted") or c["id"] not in p2o:
                 continue
@@ -118,11 +121,47 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
             rel = [e for e in events if e["kind"] == "relocated" and e["object_id"] == o.id]
             kind = piece_outcome(o, c["id"], doc["map_objects"], run["objects"], events)
             old_xy, new_xy = np.asarray(c["old_pose"][:2]), np.asarray(c["new_pose"][:2])
+            views = piece_views(scans, prev[c["id"]], cur.get(c["id"]))
             out.append({"run": k + 1, "label": c["label"], "outcome": kind, "kind": c["kind"],
                         "moved_m": round(float(np.linalg.norm(new_xy - old_xy)), 3),
-                        "observed": observed(scans, prev[c["id"]], cur.get(c["id"])),
-                        "scan": rel[-1]["scan_index"] if rel else None})
+                        "observed": observed(scans, prev[c["id"]], cur.get(c["id"]),
+                                             views=views),
+                        "scan": rel[-1]["scan_index"] if rel else None,
+                        **piece_evidence(views[0] | views[1], trace, gt)})
         prev = cur
+    return out
+
+
+def piece_evidence(seen: np.ndarray, trace, gt_xytheta: np.ndarray) -> dict:
+    """What GATMO had of a piece in a run: of the scans that saw it (``seen`` (N,) bool: its
+    old place seen through or its new place seen, from the true poses), how many it was handed
+    from a trusted pose (``views_taken``), how many of those the scan-to-map alignment
+    confirmed (``views_confirmed``: only they count for absence and the nudge), how many
+    alignments did not converge (``views_not_converged``), and the median error [m] of the
+    confirmed poses against ``gt_xytheta`` (N, 3) (None without any)."""
+    given = trace.gatmo_poses_xytheta
+    taken = seen & np.isfinite(given[:, 0])
+    confirmed = taken & trace.gatmo_verified
+    err = np.hypot(*(given[confirmed, :2] - gt_xytheta[confirmed, :2]).T)
+    return {"views": int(seen.sum()), "views_taken": int(taken.sum()),
+            "views_confirmed": int(confirmed.sum()),
+            "views_not_converged": int((seen & (trace.align_outcomes == "not_converged")).sum()),
+            "confirmed_error_m": round(float(np.median(err)), 4) if len(err) else None}
+
+
+def evidence_by_outcome(outcomes: list[dict]) -> dict:
+    """Over pieces seen at both places, per outcome: how many, the median share of the scans
+    that saw them which GATMO took from a confirmed pose, and the median of their confirmed
+    poses' median error [m]."""
+    out = {}
+    for kind in ("found", "twin", "wrong", "absent", "missed"):
+        os_ = [o for o in outcomes if o["observed"] == "both" and o["outcome"] == kind
+               and "views" in o]
+        share = [o["views_confirmed"] / o["views"] for o in os_ if o["views"]]
+        err = [o["confirmed_error_m"] for o in os_ if o["confirmed_error_m"] is not None]
+        out[kind] = {"pieces": len(os_),
+                     "confirmed_share_median": float(np.median(share)) if share else None,
+                     "confirmed_error_median_m": float(np.median(err)) if err else None}
     return out
 
 
@@ -245,6 +284,7 @@ def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
         o["outcome"] in ("found", "twin", "wrong", "absent") for o in seen_old) / max(
         len(seen_old), 1)
     total["table_ii"] = table_ii(rows)
+    total["evidence_seen_both"] = evidence_by_outcome([o for r in rows for o in r["outcomes"]])
     return total
 
 

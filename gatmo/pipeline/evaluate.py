@@ -271,19 +271,20 @@ def piece_outcome(o, piece_id: int, layout0: list[dict], layout: list[dict],
     return "wrong" if "relocated" in kinds else "absent" if "absent" in kinds else "missed"
 
 
-def observability(scans, piece_old: dict, piece_new: dict | None,
-                  res: float = 0.05) -> tuple[int, int]:
-    """How well a run saw a piece that moved, from the simulator's truth: (scans with >= 5
-    rays through its old footprint, scans with >= 8 returns on its new one). ``scans``: the
-    run's scans with ground-truth poses; pieces as in scenario.json (``piece_new`` None: it
-    was removed)."""
+def piece_views(scans, piece_old: dict, piece_new: dict | None,
+                res: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Which scans of a run saw a piece that moved, from the simulator's truth: ((N,) bool,
+    scans with >= 5 rays through its old footprint; (N,) bool, scans with >= 8 returns on its
+    new one). ``scans``: the run's scans with ground-truth poses; pieces as in scenario.json
+    (``piece_new`` None: it was removed)."""
     told = cKDTree(transform_points(np.array(piece_old["pose"]), _piece_points(piece_old, res)))
     tnew = None
     if piece_new is not None:
         tnew = cKDTree(transform_points(np.array(piece_new["pose"]),
                                         _piece_points(piece_new, res)))
-    n_old = n_new = 0
-    for s in scans:
+    n = len(scans)
+    old, new = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    for i, s in enumerate(scans):
         lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
         r = s.ranges_m
         a = lp[2] + s.angles_rad
@@ -291,7 +292,7 @@ def observability(scans, piece_old: dict, piece_new: dict | None,
         valid = r < s.range_max_m
         if tnew is not None:
             d, _ = tnew.query(lp[:2] + r[valid, None] * u[valid], distance_upper_bound=0.06)
-            n_new += int(np.isfinite(d).sum() >= 8)
+            new[i] = np.isfinite(d).sum() >= 8
         rr = np.where(valid, r, s.range_max_m) - 0.1
         ts = np.arange(0.05, s.range_max_m, 0.05)
         pts = lp[:2][None, None] + ts[None, :, None] * u[:, None, :]
@@ -299,14 +300,26 @@ def observability(scans, piece_old: dict, piece_new: dict | None,
         d, _ = told.query(pts[m], distance_upper_bound=0.03)
         inside = np.zeros(m.shape, bool)
         inside[m] = np.isfinite(d)
-        n_old += int(inside.any(axis=1).sum() >= 5)
-    return n_old, n_new
+        old[i] = inside.any(axis=1).sum() >= 5
+    return old, new
 
 
-def observed(scans, piece_old: dict, piece_new: dict | None, min_scans: int = 5) -> str:
+def observability(scans, piece_old: dict, piece_new: dict | None,
+                  res: float = 0.05) -> tuple[int, int]:
+    """How well a run saw a piece that moved: (scans with >= 5 rays through its old
+    footprint, scans with >= 8 returns on its new one); see :func:`piece_views`."""
+    old, new = piece_views(scans, piece_old, piece_new, res)
+    return int(old.sum()), int(new.sum())
+
+
+def observed(scans, piece_old: dict, piece_new: dict | None, min_scans: int = 5,
+             views: tuple[np.ndarray, np.ndarray] | None = None) -> str:
     """"both" (old place seen through and new place seen, each in ``min_scans`` scans), "old",
-    "new" or "none": whether GATMO could have found the piece in this run at all."""
-    n_old, n_new = observability(scans, piece_old, piece_new)
+    "new" or "none": whether GATMO could have found the piece in this run at all. ``views``:
+    :func:`piece_views` of the same arguments, if already at hand."""
+    if views is None:
+        views = piece_views(scans, piece_old, piece_new)
+    n_old, n_new = int(views[0].sum()), int(views[1].sum())
     if n_old >= min_scans and n_new >= min_scans:
         return "both"
     return "new" if n_new >= min_scans else "old" if n_old >= min_scans else "none"

@@ -48,6 +48,11 @@ class RunTrace:
     # (N, 3) base poses (map frame) the stack handed GATMO as trusted; NaN rows: scans it was
     # not handed (no trusted pose; every scan on the static side); None: not recorded
     gatmo_poses_xytheta: np.ndarray | None = None
+    # (N,) bool: of those, the poses the scan-to-map alignment confirmed (GATMO's
+    # pose_verified); (N,) str: what the alignment concluded per scan
+    # (gatmo.pipeline.stack.ALIGN_OUTCOMES, "" where it did not run); None: not recorded
+    gatmo_verified: np.ndarray | None = None
+    align_outcomes: np.ndarray | None = None
 
     def mean_ms(self) -> float:
         return float(np.mean(self.ms)) if len(self.ms) else float("nan")
@@ -187,6 +192,8 @@ def run_side(
     loc_poses = np.empty((n, 3))
     confident = np.zeros(n, dtype=bool)
     gatmo_poses = np.full((n, 3), np.nan)
+    gatmo_verified = np.zeros(n, dtype=bool)
+    align_outcomes = np.full(n, "", dtype=object)
     ms = np.empty(n)
     events: list = []
     resets = 0
@@ -198,6 +205,8 @@ def run_side(
         confident[i] = step.confident
         if step.gatmo_pose_xytheta is not None:
             gatmo_poses[i] = step.gatmo_pose_xytheta
+        gatmo_verified[i] = step.gatmo_pose_verified
+        align_outcomes[i] = step.align_outcome or ""
         ms[i] = step.ms
         resets += int(step.reset)
         for ev in step.events:
@@ -226,6 +235,8 @@ def run_side(
         resets=resets,
         map_updates=stack.n_map_updates,
         gatmo_poses_xytheta=gatmo_poses,
+        gatmo_verified=gatmo_verified,
+        align_outcomes=align_outcomes,
     )
 
 

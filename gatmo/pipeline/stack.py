@@ -213,6 +213,15 @@ class FusionConfig(GatmoModel):
     bridge_max_travel_m: float = Field(3.0, gt=0)
 
 
+#: what a scan-to-map alignment (:meth:`MapAligner.refine`) concluded: ``confirmed`` the pose;
+#: ``contradicts`` it (converged, matched, but corrects it more than ``align_max_correction_*``);
+#: inconclusive: ``not_converged`` (within ``align_max_iter``), ``degenerate``, ``low_fitness``
+#: (below ``align_min_fitness``), ``loose`` (below ``align_min_tight_fraction``),
+#: ``few_points`` (under 20 after downsampling) or ``no_map``
+ALIGN_OUTCOMES = ("confirmed", "contradicts", "not_converged", "degenerate", "low_fitness",
+                  "loose", "few_points", "no_map")
+
+
 @dataclass
 class MapAligner:
     """Scan-to-map ICP around a pose: the precise pose GATMO needs, and a check of it.
@@ -229,6 +238,8 @@ class MapAligner:
         self._pts = None
         self._normals = None
         self.last_verified = False  # the last refine() confirmed the pose (not inconclusive)
+        #: why the last refine() confirmed the pose or not: one of ALIGN_OUTCOMES
+        self.last_outcome = "no_map"
 
     def set_grid(self, grid: OccupancyGrid) -> None:
         from scipy import ndimage
@@ -252,14 +263,19 @@ class MapAligner:
         f = self.fusion
         inconclusive = (pose_xytheta, f.align_inconclusive == "filter_pose")
         self.last_verified = False
+        self.last_outcome = "no_map"
         if self._tree is None:
             return inconclusive
         pts = voxel_downsample(scan.points_base_xy(), 0.05)
+        self.last_outcome = "few_points"
         if len(pts) < 20:
             return inconclusive
         res = icp_2d(pts, self._pts, pose_xytheta, target_tree=self._tree,
                      target_normals=self._normals, max_corr_dist_m=0.3, max_iter=f.align_max_iter,
                      kernel=f.align_kernel, kernel_scale_m=f.align_kernel_scale_m)
+        self.last_outcome = ("not_converged" if not res.converged else "degenerate"
+                             if res.degenerate else "low_fitness"
+                             if res.fitness < f.align_min_fitness else "loose")
         if not res.converged or res.degenerate or res.fitness < f.align_min_fitness:
             return inconclusive
         if f.align_min_tight_fraction > 0:
@@ -271,6 +287,7 @@ class MapAligner:
         ok = (np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
               and abs(corr[2]) <= np.radians(f.align_max_correction_deg))
         self.last_verified = bool(ok)
+        self.last_outcome = "confirmed" if ok else "contradicts"
         return (res.T_target_source if ok else pose_xytheta), bool(ok)
 
 
@@ -290,6 +307,12 @@ class StackStep:
     # the base pose (map frame) handed to GATMO as trusted, after the scan-to-map alignment (so
     # it may differ from pose_xytheta); None: GATMO was not handed this scan as trusted
     gatmo_pose_xytheta: np.ndarray | None = None
+    # that pose was confirmed by the scan-to-map alignment (GATMO's pose_verified: absence and
+    # the nudge take only such scans)
+    gatmo_pose_verified: bool = False
+    # what the scan-to-map alignment concluded on this scan (one of ALIGN_OUTCOMES); None: it
+    # did not run (no trusted pose, or align_to_map off)
+    align_outcome: str | None = None
 
 
 def _injected(localizer) -> int:
@@ -500,6 +523,8 @@ class LocalizationStack:
         events: list = []
         changed = False
         gatmo_pose = None
+        verified = False
+        align_outcome = None
         if self.mapper is not None:
             # the filter updates only every update_min_d of travel; between its confident
             # updates the matcher's pose stays precise for a while (confident_for_m), and the
@@ -516,12 +541,14 @@ class LocalizationStack:
             if pose_ok and self.fusion.align_to_map:
                 map_pose, pose_ok = self._aligner.refine(pose, scan)
                 verified = self._aligner.last_verified
+                align_outcome = self._aligner.last_outcome
             elif (self.fusion.verified_suffices and self.fusion.align_to_map
                   and self._settle_left_m <= 0.0
                   and is_confident(est, self.fusion, require_update=False)):
                 # between the filter's strictly confident updates: the scan-to-map alignment
                 # alone vouches for the pose
                 refined, _ = self._aligner.refine(pose, scan)
+                align_outcome = self._aligner.last_outcome
                 if self._aligner.last_verified:
                     map_pose, pose_ok, verified = refined, True, True
                     track = self.fusion.verified_track
@@ -552,6 +579,8 @@ class LocalizationStack:
             map_changed=changed,
             ms=(time.perf_counter() - t0) * 1e3,
             gatmo_pose_xytheta=gatmo_pose,
+            gatmo_pose_verified=bool(gatmo_pose is not None and verified),
+            align_outcome=align_outcome,
         )
 
     def _bridge_step(self, scan: Scan, base_ref: np.ndarray, gatmo_pose: np.ndarray | None,

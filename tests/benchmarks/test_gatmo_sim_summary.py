@@ -34,3 +34,35 @@ def test_totals_over_seeds_leave_the_per_seed_lists_to_the_rows():
                              "desk": {"found": 0, "twin": 0, "wrong": 0, "absent": 0,
                                       "missed": 16}}
     assert "last_stale_ids" not in t["last_run_census_per_seed"]
+
+
+def test_piece_evidence_counts_the_views_gatmo_took_and_confirmed():
+    """Six scans, four of which saw the piece: two handed to GATMO unconfirmed (one of them
+    an alignment that did not converge), one confirmed 3 cm off; the one confirmed scan that
+    did not see the piece does not count."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from benchmarks.bench_gatmo_sim import evidence_by_outcome, piece_evidence
+
+    gt = np.zeros((6, 3))
+    nan = [np.nan] * 3
+    trace = SimpleNamespace(
+        gatmo_poses_xytheta=np.array([nan, [0.5, 0, 0], [0, 0.03, 0], [0, 0, 0], nan,
+                                      [0, 0.04, 0]]),
+        gatmo_verified=np.array([False, False, True, False, False, True]),
+        align_outcomes=np.array(["", "not_converged", "confirmed", "low_fitness", "",
+                                 "confirmed"], dtype=object))
+    seen = np.array([True, True, True, True, False, False])
+    ev = piece_evidence(seen, trace, gt)
+    assert ev == {"views": 4, "views_taken": 3, "views_confirmed": 1,
+                  "views_not_converged": 1, "confirmed_error_m": 0.03}
+    none = piece_evidence(np.array([True, False, False, False, True, False]), trace, gt)
+    assert none["views_confirmed"] == 0 and none["confirmed_error_m"] is None
+    by = evidence_by_outcome([{"observed": "both", "outcome": "missed", **ev},
+                              {"observed": "both", "outcome": "missed", **none},
+                              {"observed": "old", "outcome": "found", **ev}])
+    assert by["missed"] == {"pieces": 2, "confirmed_share_median": 0.125,
+                            "confirmed_error_median_m": 0.03}
+    assert by["found"]["pieces"] == 0 and by["found"]["confirmed_share_median"] is None

@@ -110,6 +110,12 @@ def test_traces_keep_the_poses_gatmo_was_given(scen, tmp_path):
         assert 0.2 < trusted.mean() <= 1.0
         err = np.hypot(*(given[trusted, :2] - gt[trusted, :2]).T)
         assert np.median(err) < 0.1
+        # the poses the scan-to-map alignment confirmed are a part of those, and closer still
+        confirmed = full.gatmo_verified
+        assert confirmed.any() and not (confirmed & ~trusted).any()
+        assert np.array_equal(confirmed, full.align_outcomes == "confirmed")
+        assert np.median(np.hypot(*(given[confirmed, :2] - gt[confirmed, :2]).T)) < 0.05
+        assert not static.gatmo_verified.any() and (static.align_outcomes == "").all()
 
 
 @pytest.mark.parametrize("preset", ["hall", "office"])

@@ -541,8 +541,38 @@ def test_an_alignment_loose_everywhere_is_inconclusive_with_align_min_tight_frac
     a = _aligner(grid, align_min_tight_fraction=min_tight)
     got, trusted = a.refine(truth, scan)
     assert trusted and a.last_verified == verified
+    assert a.last_outcome == ("confirmed" if verified else "loose")
     if not verified:
         assert np.array_equal(got, truth)
+
+
+@pytest.mark.parametrize("offset_xy_m, kw, outcome", [
+    ((0.0, 0.0), {}, "confirmed"),
+    ((0.08, 0.06), {"align_max_iter": 1}, "not_converged"),
+    ((0.08, 0.06), {"align_max_correction_m": 0.05}, "contradicts"),
+])
+def test_the_alignment_says_why_it_confirmed_a_pose_or_not(offset_xy_m, kw, outcome):
+    """``MapAligner.last_outcome``: a scan from the true pose is confirmed there; from 10 cm off
+    one Gauss-Newton step does not converge, and a converged correction larger than
+    ``align_max_correction_m`` contradicts the pose it started from."""
+    from gatmo.pipeline.stack import ALIGN_OUTCOMES, MapAligner
+
+    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
+    grid = room_grid(6, 4, 0.05, boxes=boxes)
+    truth = np.array([3.0, 1.9, 0.0])
+    scan = make_scan(grid, truth, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0)
+    blank = MapAligner(FusionConfig(**kw))
+    blank.refine(truth, scan)
+    assert blank.last_outcome == "no_map" and not blank.last_verified
+    a = _aligner(grid, **kw)
+    start = truth + [*offset_xy_m, 0.0]
+    got, _ = a.refine(start, scan)
+    assert a.last_outcome == outcome and outcome in ALIGN_OUTCOMES
+    assert a.last_verified == (outcome == "confirmed")
+    if outcome == "confirmed":
+        assert np.hypot(*(got[:2] - truth[:2])) < 0.01
+    else:  # the pose it was handed comes back
+        np.testing.assert_allclose(got, start)
 
 
 def test_returns_of_a_box_shifted_a_decimetre_are_withheld_with_mask_offset_objects():
