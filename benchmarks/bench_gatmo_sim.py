@@ -155,11 +155,11 @@ def evidence_by_outcome(outcomes: list[dict]) -> dict:
     poses' median error [m]."""
     out = {}
     for kind in ("found", "twin", "wrong", "absent", "missed"):
-        os_ = [o for o in outcomes if o["observed"] == "both" and o["outcome"] == kind
-               and "views" in o]
-        share = [o["views_confirmed"] / o["views"] for o in os_ if o["views"]]
-        err = [o["confirmed_error_m"] for o in os_ if o["confirmed_error_m"] is not None]
-        out[kind] = {"pieces": len(os_),
+        pieces = [o for o in outcomes if o["observed"] == "both" and o["outcome"] == kind
+                  and "views" in o]
+        share = [o["views_confirmed"] / o["views"] for o in pieces if o["views"]]
+        err = [o["confirmed_error_m"] for o in pieces if o["confirmed_error_m"] is not None]
+        out[kind] = {"pieces": len(pieces),
                      "confirmed_share_median": float(np.median(share)) if share else None,
                      "confirmed_error_median_m": float(np.median(err)) if err else None}
     return out

@@ -267,8 +267,8 @@ class MapAligner:
         if self._tree is None:
             return inconclusive
         pts = voxel_downsample(scan.points_base_xy(), 0.05)
-        self.last_outcome = "few_points"
         if len(pts) < 20:
+            self.last_outcome = "few_points"
             return inconclusive
         res = icp_2d(pts, self._pts, pose_xytheta, target_tree=self._tree,
                      target_normals=self._normals, max_corr_dist_m=0.3, max_iter=f.align_max_iter,
