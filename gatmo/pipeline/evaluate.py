@@ -304,14 +304,6 @@ def piece_views(scans, piece_old: dict, piece_new: dict | None,
     return old, new
 
 
-def observability(scans, piece_old: dict, piece_new: dict | None,
-                  res: float = 0.05) -> tuple[int, int]:
-    """How well a run saw a piece that moved: (scans with >= 5 rays through its old
-    footprint, scans with >= 8 returns on its new one); see :func:`piece_views`."""
-    old, new = piece_views(scans, piece_old, piece_new, res)
-    return int(old.sum()), int(new.sum())
-
-
 def observed(scans, piece_old: dict, piece_new: dict | None, min_scans: int = 5,
              views: tuple[np.ndarray, np.ndarray] | None = None) -> str:
     """"both" (old place seen through and new place seen, each in ``min_scans`` scans), "old",
