@@ -158,16 +158,30 @@ class FusionConfig(GatmoModel):
     seed 11's time lost over runs 11-50 is 47 % instead of 27 % (seed 12: 35 % instead of 38
     %). docs/experiments.md, eighteenth session.
 
-    ``publish_pose``: the pose the stack reports. ``localizer`` (default): the filter's own
-    estimate, carried by odometry between its updates, as AMCL publishes it; the matcher's
-    fused pose (then refined against the map) serves GATMO only. ``fused``: the matcher's
-    pose re-anchored on the filter (paper, Sec. IV-B), locally more precise (Intel relations
-    0.052 m / 0.65 deg against 0.061 m / 0.94 deg) but with larger errors between resets
-    (ATE 7-11 % higher in simulated offices where nothing moved).
+    ``publish_pose``: the pose the stack reports. ``aligned`` (default; needs GATMO and
+    ``align_to_map``): the pose the scan-to-map alignment confirmed on the last scan it
+    confirmed (the pose GATMO takes as ``pose_verified``), carried by the wheels' odometry for
+    at most ``publish_carry_m`` / ``publish_carry_deg``, else the filter's own estimate (also
+    when the carried pose strays more than ``max_offset_jump_m`` from it, or the filter
+    jumped). The particle mean trails a sharp likelihood field by a few cm; the alignment puts
+    a scan onto the map's edges. Against ``localizer`` (twenty-fourth session): simulated
+    halls before anything moved 0.060 -> 0.033 m ATE (seeds 100-109), rearranged 0.150 ->
+    0.146 m (300-319) and 0.153 -> 0.147 m (100-109), offices 0.053 -> 0.044 m (lower on 5 of
+    5), Intel (demo configuration) 0.183 -> 0.176 m, median 0.102 -> 0.077 m, relations
+    0.060 -> 0.051 m; GATMO's work is unchanged (it is handed the same poses). With a filter
+    never strictly confident (AMCL's broad default field on the real logs) it is the
+    filter's pose. ``localizer``: the filter's own estimate, carried by odometry between its
+    updates, as AMCL publishes it. ``fused``: the matcher's pose re-anchored on the filter
+    (paper, Sec. IV-B), locally more precise (Intel relations 0.052 m / 0.65 deg against
+    0.061 m / 0.94 deg) but with larger errors between resets (ATE 7-11 % higher in
+    simulated offices where nothing moved).
     """
 
     use_scan_matcher: bool = True
-    publish_pose: Literal["localizer", "fused"] = "localizer"
+    publish_pose: Literal["localizer", "fused", "aligned"] = "aligned"
+    publish_carry_m: float = Field(0.5, ge=0)
+    publish_carry_deg: float = Field(20.0, ge=0)
+    publish_min_tight_fraction: float = Field(0.8, ge=0, le=1)
     reset_max_std_xy_m: float = 0.15
     reset_max_std_theta_deg: float = 5.0
     absence_max_std_xy_m: float = 0.1
@@ -240,6 +254,9 @@ class MapAligner:
         self.last_verified = False  # the last refine() confirmed the pose (not inconclusive)
         #: why the last refine() confirmed the pose or not: one of ALIGN_OUTCOMES
         self.last_outcome = "no_map"
+        #: of the last refine()'s points, the fraction within ``align_tight_m`` of a map edge
+        #: at the pose it converged to (0 when it did not run)
+        self.last_tight_fraction = 0.0
 
     def set_grid(self, grid: OccupancyGrid) -> None:
         from scipy import ndimage
@@ -264,6 +281,7 @@ class MapAligner:
         inconclusive = (pose_xytheta, f.align_inconclusive == "filter_pose")
         self.last_verified = False
         self.last_outcome = "no_map"
+        self.last_tight_fraction = 0.0
         if self._tree is None:
             return inconclusive
         pts = voxel_downsample(scan.points_base_xy(), 0.05)
@@ -278,11 +296,11 @@ class MapAligner:
                              if res.fitness < f.align_min_fitness else "loose")
         if not res.converged or res.degenerate or res.fitness < f.align_min_fitness:
             return inconclusive
-        if f.align_min_tight_fraction > 0:
-            d, _ = self._tree.query(transform_points(res.T_target_source, pts),
-                                    distance_upper_bound=f.align_tight_m)
-            if np.mean(np.isfinite(d)) < f.align_min_tight_fraction:
-                return inconclusive
+        d, _ = self._tree.query(transform_points(res.T_target_source, pts),
+                                distance_upper_bound=f.align_tight_m)
+        self.last_tight_fraction = float(np.mean(np.isfinite(d)))
+        if self.last_tight_fraction < f.align_min_tight_fraction:
+            return inconclusive
         corr = relative(pose_xytheta, res.T_target_source)
         ok = (np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
               and abs(corr[2]) <= np.radians(f.align_max_correction_deg))
@@ -391,6 +409,8 @@ class LocalizationStack:
             self._takes_withheld = False
         self._coast_m = 0.0  # coast_withheld_fraction: travel coasted in a row [m]
         self.n_coasted = 0
+        # publish_pose aligned: the last confirmed (map pose, odometry pose) it is carried from
+        self._published_anchor: tuple[np.ndarray, np.ndarray] | None = None
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -413,6 +433,7 @@ class LocalizationStack:
         self._coast_m = 0.0
         self._gatmo_last = None
         self._anchor, self._bridge, self._bridge_travel_m = None, [], 0.0
+        self._published_anchor = None
         self._injected_seen = _injected(self.localizer)
         self._slide: deque = deque()  # (travel m, filter pose, odometry) over slide_window_m
         self._travel_m = 0.0
@@ -567,10 +588,16 @@ class LocalizationStack:
             if changed and self._aligner is not None:
                 self._aligner.set_grid(self.mapper.grid())
         self.n_scans += 1
+        published = np.array([loc_pose[0], loc_pose[1], float(wrap_angle(loc_pose[2]))])
+        if self.fusion.publish_pose == "fused":
+            published = pose
+        elif self.fusion.publish_pose == "aligned":
+            tight = (align_outcome == "confirmed" and self._aligner.last_tight_fraction
+                     >= self.fusion.publish_min_tight_fraction)
+            published = self._aligned_pose(published, odom, gatmo_pose if tight else None)
         return StackStep(
             stamp_s=float(scan.stamp_s),
-            pose_xytheta=pose if self.fusion.publish_pose == "fused" else
-            np.array([loc_pose[0], loc_pose[1], float(wrap_angle(loc_pose[2]))]),
+            pose_xytheta=published,
             localizer_pose_xytheta=loc_pose,
             cov=np.asarray(est.cov, dtype=float),
             confident=confident,
@@ -718,6 +745,29 @@ class LocalizationStack:
         ranges = scan.ranges_m.copy()
         ranges[withheld] = np.nan
         return replace(scan, ranges_m=ranges), withheld
+
+    def _aligned_pose(self, loc_pose: np.ndarray, odom: np.ndarray,
+                      confirmed: np.ndarray | None) -> np.ndarray:
+        """``publish_pose: aligned``: ``confirmed`` (the alignment's pose on this scan, or
+        None), else the last one carried by odometry while within ``publish_carry_*`` and
+        ``max_offset_jump_m`` of the filter's ``loc_pose``, else ``loc_pose``."""
+        f = self.fusion
+        if confirmed is not None:
+            self._published_anchor = (np.asarray(confirmed, dtype=float).copy(), odom.copy())
+            out = self._published_anchor[0]
+            return np.array([out[0], out[1], float(wrap_angle(out[2]))])
+        if self._published_anchor is None or self._settle_left_m > 0.0:
+            self._published_anchor = None  # none yet, or the filter jumped since
+            return loc_pose
+        a_pose, a_odom = self._published_anchor
+        d = relative(a_odom, odom)
+        if np.hypot(d[0], d[1]) > f.publish_carry_m or abs(d[2]) > np.radians(f.publish_carry_deg):
+            self._published_anchor = None
+            return loc_pose
+        carried = compose(a_pose, d)
+        if np.hypot(*(carried[:2] - loc_pose[:2])) > f.max_offset_jump_m:
+            return loc_pose
+        return np.array([carried[0], carried[1], float(wrap_angle(carried[2]))])
 
     def end_run(self) -> list:
         """Close a log: GATMO adds dominant chairs in Gamma to the map (paper, Sec. V)."""

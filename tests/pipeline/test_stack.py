@@ -87,9 +87,10 @@ def test_offset_reset_makes_matcher_pose_land_on_map_frame():
     assert [r[1] for r in stack.resets] == ["start", "confident"]
 
 
-def test_default_publishes_the_localizer_pose_and_gives_gatmo_the_fused_one():
+def test_unaligned_stack_publishes_the_localizer_pose_and_gives_gatmo_the_fused_one():
     # the localizer is biased (0.3 m, 0.05 rad) and confident once; the matcher is exact in
-    # its own frame
+    # its own frame; without the scan-to-map alignment no pose is confirmed, so the default
+    # publish_pose (aligned) publishes the localizer's
     truth = _truth()
     n = len(truth)
     b = np.array([0.3, 0.0, 0.05])
@@ -755,3 +756,96 @@ def test_a_scan_gatmo_withholds_mostly_is_handed_to_the_localizer_empty():
     # bounded: after 0.3 m coasted (8 scans of 4 cm), the scans are weighed again
     empty, withheld, kept, n = got[(0.5, 0.3)]
     assert 6 <= n <= 10 and empty[2:8].any() and not empty[-10:].any()
+
+
+@pytest.mark.parametrize("publish", ["localizer", "aligned"])
+def test_aligned_publishing_reports_the_confirmed_pose_carried_by_odometry(publish):
+    """``publish_pose: aligned``: the localizer is 6 cm / 1.7 deg off and strictly confident
+    on every fifth scan; there the scan-to-map alignment confirms the true pose, the next
+    scans carry it by odometry (here exact) until ``publish_carry_m``, and beyond that the
+    localizer's own pose is published again. The default publishes the localizer's pose."""
+    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
+    grid = room_grid(6, 4, 0.05, boxes=boxes)
+    n = 30
+    truth = np.stack([np.linspace(1.6, 4.2, n), np.full(n, 1.9), np.linspace(0.0, 0.3, n)],
+                     axis=1)  # 9 cm per scan
+    bias = np.array([0.05, -0.03, 0.03])
+    confident = list(range(0, 11, 5))  # 0, 5, 10: none after scan 10
+    loc = ScriptedLocalizer(truth, confident_at=confident, bias=bias)
+
+    class Mapper:
+        def grid(self):
+            return grid
+
+        def begin_run(self, run_id):
+            pass
+
+        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
+            return []
+
+        def pop_map_changes(self):
+            return []
+
+    fusion = FusionConfig(publish_pose=publish, publish_carry_m=0.3, use_scan_matcher=False,
+                          absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0)
+    stack = LocalizationStack(loc, None, Mapper(), fusion)
+    stack.begin_run(1)
+    scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
+                       odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
+    out = [stack.step(s) for s in scans]
+    published = np.array([o.pose_xytheta for o in out])
+    err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
+    assert [i for i, o in enumerate(out) if o.gatmo_pose_verified] == confident
+    if publish == "localizer":
+        np.testing.assert_allclose(published, truth + bias, atol=1e-9)
+        return
+    assert np.all(err[confident] < 0.01)
+    # carried: within 0.3 m of travel (3 scans of 9 cm) after each confirmed scan
+    for c in confident:
+        assert np.all(err[c + 1:c + 4] < 0.01)
+        np.testing.assert_allclose(published[c + 4], truth[c + 4] + bias, atol=1e-9)
+    np.testing.assert_allclose(published[14:], truth[14:] + bias, atol=1e-9)
+
+
+@pytest.mark.parametrize("min_tight", [0.0, 0.9])
+def test_a_loose_alignment_is_not_published(min_tight):
+    """Every box stands 0.12 m east of where the map has it: the alignment confirms most
+    scans (the walls pin it), but only 64-77 % of the returns lie within 5 cm of a map edge.
+    ``publish_min_tight_fraction`` 0.9 publishes the localizer's pose instead; 0 the
+    alignment's."""
+    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
+    grid = room_grid(6, 4, 0.05, boxes=boxes)
+    world = room_grid(6, 4, 0.05, boxes=[(a + 0.12, b, c + 0.12, d) for a, b, c, d in boxes])
+    n = 6
+    truth = np.stack([np.linspace(2.8, 3.3, n), np.full(n, 1.9), np.zeros(n)], axis=1)
+    bias = np.array([0.03, -0.02, 0.01])
+    loc = ScriptedLocalizer(truth, confident_at=range(n), bias=bias)
+
+    class Mapper:
+        def grid(self):
+            return grid
+
+        def begin_run(self, run_id):
+            pass
+
+        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
+            return []
+
+        def pop_map_changes(self):
+            return []
+
+    fusion = FusionConfig(publish_min_tight_fraction=min_tight, use_scan_matcher=False)
+    stack = LocalizationStack(loc, None, Mapper(), fusion)
+    stack.begin_run(1)
+    out = [stack.step(make_scan(world, truth[i], n_beams=361, fov_rad=2 * np.pi,
+                                max_range_m=8.0, odom_pose_xytheta=truth[i], stamp_s=float(i)))
+           for i in range(n)]
+    confirmed = [i for i, o in enumerate(out) if o.align_outcome == "confirmed"]
+    assert len(confirmed) >= 3
+    published = np.array([o.pose_xytheta for o in out])
+    if min_tight > 0:
+        np.testing.assert_allclose(published, truth + bias, atol=1e-9)
+    else:
+        for i in confirmed:
+            np.testing.assert_allclose(published[i], out[i].gatmo_pose_xytheta, atol=1e-9)
+        assert np.abs(published - (truth + bias)).max() > 0.02
