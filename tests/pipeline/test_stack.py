@@ -758,6 +758,25 @@ def test_a_scan_gatmo_withholds_mostly_is_handed_to_the_localizer_empty():
     assert 6 <= n <= 10 and empty[2:8].any() and not empty[-10:].any()
 
 
+class _MapOnly:
+    """A GATMO stand-in that only gives the stack its map (for the scan-to-map alignment)."""
+
+    def __init__(self, grid):
+        self._grid = grid
+
+    def grid(self):
+        return self._grid
+
+    def begin_run(self, run_id):
+        pass
+
+    def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
+        return []
+
+    def pop_map_changes(self):
+        return []
+
+
 @pytest.mark.parametrize("publish", ["localizer", "aligned"])
 def test_aligned_publishing_reports_the_confirmed_pose_carried_by_odometry(publish):
     """``publish_pose: aligned``: the localizer is 6 cm / 1.7 deg off and strictly confident
@@ -772,23 +791,9 @@ def test_aligned_publishing_reports_the_confirmed_pose_carried_by_odometry(publi
     bias = np.array([0.05, -0.03, 0.03])
     confident = list(range(0, 11, 5))  # 0, 5, 10: none after scan 10
     loc = ScriptedLocalizer(truth, confident_at=confident, bias=bias)
-
-    class Mapper:
-        def grid(self):
-            return grid
-
-        def begin_run(self, run_id):
-            pass
-
-        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
-            return []
-
-        def pop_map_changes(self):
-            return []
-
     fusion = FusionConfig(publish_pose=publish, publish_carry_m=0.3, use_scan_matcher=False,
                           absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0)
-    stack = LocalizationStack(loc, None, Mapper(), fusion)
+    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
     stack.begin_run(1)
     scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
                        odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
@@ -820,22 +825,8 @@ def test_a_loose_alignment_is_not_published(min_tight):
     truth = np.stack([np.linspace(2.8, 3.3, n), np.full(n, 1.9), np.zeros(n)], axis=1)
     bias = np.array([0.03, -0.02, 0.01])
     loc = ScriptedLocalizer(truth, confident_at=range(n), bias=bias)
-
-    class Mapper:
-        def grid(self):
-            return grid
-
-        def begin_run(self, run_id):
-            pass
-
-        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
-            return []
-
-        def pop_map_changes(self):
-            return []
-
     fusion = FusionConfig(publish_min_tight_fraction=min_tight, use_scan_matcher=False)
-    stack = LocalizationStack(loc, None, Mapper(), fusion)
+    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
     stack.begin_run(1)
     out = [stack.step(make_scan(world, truth[i], n_beams=361, fov_rad=2 * np.pi,
                                 max_range_m=8.0, odom_pose_xytheta=truth[i], stamp_s=float(i)))
