@@ -160,16 +160,19 @@ class FusionConfig(GatmoModel):
 
     ``publish_pose``: the pose the stack reports. ``aligned`` (default; needs GATMO and
     ``align_to_map``): the pose the scan-to-map alignment confirmed on the last scan it
-    confirmed (the pose GATMO takes as ``pose_verified``), carried by the wheels' odometry for
-    at most ``publish_carry_m`` / ``publish_carry_deg``, else the filter's own estimate (also
-    when the carried pose strays more than ``max_offset_jump_m`` from it, or the filter
-    jumped). The particle mean trails a sharp likelihood field by a few cm; the alignment puts
-    a scan onto the map's edges. Against ``localizer`` (twenty-fourth session): simulated
-    halls before anything moved 0.060 -> 0.033 m ATE (seeds 100-109), rearranged 0.150 ->
-    0.146 m (300-319) and 0.153 -> 0.147 m (100-109), offices 0.053 -> 0.044 m (lower on 5 of
-    5), Intel (demo configuration) 0.183 -> 0.176 m, median 0.102 -> 0.077 m, relations
-    0.060 -> 0.051 m; GATMO's work is unchanged (it is handed the same poses). With a filter
-    never strictly confident (AMCL's broad default field on the real logs) it is the
+    confirmed with at least ``publish_min_tight_fraction`` of its points within
+    ``align_tight_m`` of a map edge (a confirmed but loose fit can be a wrong local one: the
+    demo's run 2 starts 0.33 m off and such a fit 0.42 m off), carried by the wheels'
+    odometry for at most ``publish_carry_m`` / ``publish_carry_deg``, else the filter's own
+    estimate (also when the carried pose strays more than ``max_offset_jump_m`` from it, or
+    the filter jumped). The particle mean trails a sharp likelihood field by a few cm; the
+    alignment puts a scan onto the map's edges. Against ``localizer`` (twenty-fourth
+    session): simulated halls before anything moved 0.060 -> 0.032 m ATE (seeds 100-109),
+    rearranged 0.150 -> 0.144 m (300-319, lower on 18 of 20), 0.153 -> 0.148 m (100-109) and
+    0.301 -> 0.295 m (400-419), offices 0.053 -> 0.043 m (lower on 5 of 5), Intel (demo
+    configuration) 0.183 -> 0.177 m, median 0.102 -> 0.080 m, relations 0.060 -> 0.053 m;
+    GATMO's work is unchanged (it is handed the same poses). With a filter never strictly
+    confident (AMCL's broad default field on the real logs) it is the
     filter's pose. ``localizer``: the filter's own estimate, carried by odometry between its
     updates, as AMCL publishes it. ``fused``: the matcher's pose re-anchored on the filter
     (paper, Sec. IV-B), locally more precise (Intel relations 0.052 m / 0.65 deg against
