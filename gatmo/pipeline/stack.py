@@ -336,6 +336,11 @@ class StackStep:
     align_outcome: str | None = None
 
 
+def _wrapped(pose_xytheta) -> np.ndarray:
+    """A new (3,) pose array with the heading wrapped to [-pi, pi)."""
+    return np.array([pose_xytheta[0], pose_xytheta[1], float(wrap_angle(pose_xytheta[2]))])
+
+
 def _injected(localizer) -> int:
     """Random particles the localizer has injected so far (AMCL's recovery; 0 if it does not
     count them)."""
@@ -542,7 +547,7 @@ class LocalizationStack:
         if self._last_pose is not None:
             self._travel_since_reset_m += float(np.hypot(*(pose[:2] - self._last_pose[:2])))
         self._last_pose = pose.copy()
-        pose = np.array([pose[0], pose[1], float(wrap_angle(pose[2]))])
+        pose = _wrapped(pose)
 
         events: list = []
         changed = False
@@ -591,7 +596,7 @@ class LocalizationStack:
             if changed and self._aligner is not None:
                 self._aligner.set_grid(self.mapper.grid())
         self.n_scans += 1
-        published = np.array([loc_pose[0], loc_pose[1], float(wrap_angle(loc_pose[2]))])
+        published = _wrapped(loc_pose)
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
@@ -756,9 +761,8 @@ class LocalizationStack:
         ``max_offset_jump_m`` of the filter's ``loc_pose``, else ``loc_pose``."""
         f = self.fusion
         if confirmed is not None:
-            self._published_anchor = (np.asarray(confirmed, dtype=float).copy(), odom.copy())
-            out = self._published_anchor[0]
-            return np.array([out[0], out[1], float(wrap_angle(out[2]))])
+            self._published_anchor = (_wrapped(confirmed), odom.copy())
+            return self._published_anchor[0]
         if self._published_anchor is None or self._settle_left_m > 0.0:
             self._published_anchor = None  # none yet, or the filter jumped since
             return loc_pose
@@ -770,7 +774,7 @@ class LocalizationStack:
         carried = compose(a_pose, d)
         if np.hypot(*(carried[:2] - loc_pose[:2])) > f.max_offset_jump_m:
             return loc_pose
-        return np.array([carried[0], carried[1], float(wrap_angle(carried[2]))])
+        return carried  # compose() wraps the heading
 
     def end_run(self) -> list:
         """Close a log: GATMO adds dominant chairs in Gamma to the map (paper, Sec. V)."""
