@@ -178,6 +178,26 @@ class FusionConfig(GatmoModel):
     (paper, Sec. IV-B), locally more precise (Intel relations 0.052 m / 0.65 deg against
     0.061 m / 0.94 deg) but with larger errors between resets (ATE 7-11 % higher in
     simulated offices where nothing moved).
+
+    ``relocalize`` (needs GATMO; beyond AMCL, in the spirit of slam_toolbox's localization
+    mode): a filter can be confident and wrong, its cloud too tight to reach the right place
+    again (AMCL's random particles lock onto look-alike places of a sparse hall). When the
+    filter's pose after an update explains at most ``relocalize_below_fit`` of the scan's
+    points (within ``relocalize_fit_m`` of a map edge; at least ``relocalize_min_points``
+    points), a correlative search of the current map in +- ``relocalize_window_m`` /
+    ``relocalize_window_deg`` around it, refined by ICP
+    (:func:`gatmo.scanmatch.correlative.match_to_submap`: high peak, no other place 0.3 m
+    away scoring ``relocalize_ambiguity_ratio`` of it, ICP agrees),
+    looks for a pose explaining at least ``relocalize_min_fit`` of them, and
+    ``relocalize_min_gain`` more than the filter's pose does. Found on
+    ``relocalize_scans`` updates in a row that agree after odometry (0.2 m / 5 deg), and at
+    least ``relocalize_min_shift_m`` from the filter but no farther than
+    ``relocalize_max_jump_m`` plus ``relocalize_max_jump_per_m`` times the travel since the
+    filter last explained ``relocalize_min_fit`` of a scan (or since the run's start: a
+    run's given initial pose is trusted, and pieces moved before the run fit the scan at wrong
+    places near it), the filter is started again there
+    (``relocalize_std_xy_m`` / ``relocalize_std_deg``) and GATMO waits as after any jump
+    (``settle_after_jump_m``).
     """
 
     use_scan_matcher: bool = True
@@ -225,6 +245,21 @@ class FusionConfig(GatmoModel):
     matcher_motion_max_gap_m: float = Field(0.2, gt=0)
     matcher_motion_max_gap_deg: float = Field(10.0, gt=0)
     bridge_evidence: bool = False
+    relocalize: bool = False
+    relocalize_below_fit: float = Field(0.3, ge=0, le=1)
+    relocalize_min_fit: float = Field(0.5, ge=0, le=1)
+    relocalize_min_gain: float = Field(0.25, ge=0, le=1)
+    relocalize_ambiguity_ratio: float = Field(0.9, gt=0, le=1)
+    relocalize_fit_m: float = Field(0.1, gt=0)
+    relocalize_window_m: float = Field(1.5, gt=0)
+    relocalize_window_deg: float = Field(15.0, gt=0)
+    relocalize_scans: int = Field(3, ge=1)
+    relocalize_min_points: int = Field(30, ge=3)
+    relocalize_min_shift_m: float = Field(0.2, ge=0)
+    relocalize_max_jump_m: float = Field(0.3, ge=0)
+    relocalize_max_jump_per_m: float = Field(1.0, ge=0)
+    relocalize_std_xy_m: float = Field(0.05, gt=0)
+    relocalize_std_deg: float = Field(2.0, gt=0)
     bridge_max_closure_m: float = Field(0.02, gt=0)
     bridge_max_closure_deg: float = Field(1.0, gt=0)
     bridge_max_travel_m: float = Field(3.0, gt=0)
@@ -237,6 +272,15 @@ class FusionConfig(GatmoModel):
 #: ``few_points`` (under 20 after downsampling) or ``no_map``
 ALIGN_OUTCOMES = ("confirmed", "contradicts", "not_converged", "degenerate", "low_fitness",
                   "loose", "few_points", "no_map")
+
+
+def _edge_points(grid: OccupancyGrid) -> np.ndarray:
+    """Map-frame centres (M, 2) [m] of the occupied cells with a free or unknown neighbour."""
+    from scipy import ndimage
+
+    occ = grid.occupied
+    iy, ix = np.nonzero(occ & ~ndimage.binary_erosion(occ, border_value=0))
+    return grid.cell_to_world(np.stack([ix, iy], axis=1))
 
 
 @dataclass
@@ -262,15 +306,11 @@ class MapAligner:
         self.last_tight_fraction = 0.0
 
     def set_grid(self, grid: OccupancyGrid) -> None:
-        from scipy import ndimage
         from scipy.spatial import cKDTree
 
         from gatmo.scanmatch.icp import normals_of
 
-        occ = grid.occupied
-        edge = occ & ~ndimage.binary_erosion(occ, border_value=0)
-        iy, ix = np.nonzero(edge)
-        self._pts = grid.cell_to_world(np.stack([ix, iy], axis=1))
+        self._pts = _edge_points(grid)
         self._tree = cKDTree(self._pts) if len(self._pts) >= 10 else None
         if self._tree is not None:
             self._normals, _ = normals_of(self._pts, self._tree)
@@ -310,6 +350,65 @@ class MapAligner:
         self.last_verified = bool(ok)
         self.last_outcome = "confirmed" if ok else "contradicts"
         return (res.T_target_source if ok else pose_xytheta), bool(ok)
+
+
+class Relocalizer:
+    """``relocalize``: how well a pose explains a scan on the current map, and a correlative
+    search (then ICP) for a better one around it. Base-frame points (N, 2) [m]; map poses
+    (3,) [m, m, rad]."""
+
+    def __init__(self, fusion: FusionConfig):
+        self.fusion = fusion
+        self._pts = self._tree = self._field = None
+
+    def set_grid(self, grid: OccupancyGrid) -> None:
+        from scipy.spatial import cKDTree
+
+        from gatmo.scanmatch.correlative import likelihood_field
+
+        self._pts = _edge_points(grid)
+        self._tree = cKDTree(self._pts) if len(self._pts) >= 20 else None
+        self._field = None if self._tree is None else likelihood_field(
+            self._pts, resolution_m=grid.resolution_m, sigma_m=self.fusion.relocalize_fit_m)
+
+    @property
+    def ready(self) -> bool:
+        return self._tree is not None
+
+    def fit(self, pose_xytheta: np.ndarray, points_base_xy: np.ndarray) -> float:
+        """Fraction of the points within ``relocalize_fit_m`` of a map edge at the pose."""
+        if len(points_base_xy) == 0:
+            return 0.0
+        d, _ = self._tree.query(transform_points(pose_xytheta, points_base_xy),
+                                distance_upper_bound=self.fusion.relocalize_fit_m)
+        return float(np.mean(np.isfinite(d)))
+
+    def search(self, pose_xytheta: np.ndarray, points_base_xy: np.ndarray) -> np.ndarray | None:
+        """A pose near ``pose_xytheta`` that explains at least ``relocalize_min_fit`` of the
+        points, unambiguously; None if there is none."""
+        from gatmo.scanmatch.correlative import MatchConfig, match_to_submap
+
+        f = self.fusion
+        # a second peak counts as a rival place when it is 0.3 m away; a turn of the same
+        # place (the search's heading steps) is no rival
+        m = match_to_submap(points_base_xy, self._pts, pose_xytheta,
+                            window_xy_m=f.relocalize_window_m,
+                            window_theta_rad=np.radians(f.relocalize_window_deg),
+                            cfg=MatchConfig(ambiguity_theta_rad=np.pi,
+                                            ambiguity_ratio=f.relocalize_ambiguity_ratio),
+                            field=self._field, target_tree=self._tree)
+        if not m.accepted:
+            return None
+        # a peak on the window's edge may be the slope of one beyond it (a wall slid along)
+        d = np.abs(relative(pose_xytheta, m.search.T_target_source))
+        if max(d[0], d[1]) >= f.relocalize_window_m - 0.1 or \
+                d[2] >= np.radians(f.relocalize_window_deg) - np.radians(1.0):
+            return None
+        pose = np.asarray(m.T_target_source, dtype=float)
+        fit = self.fit(pose, points_base_xy)
+        ok = fit >= max(f.relocalize_min_fit,
+                        self.fit(pose_xytheta, points_base_xy) + f.relocalize_min_gain)
+        return pose if ok else None
 
 
 @dataclass
@@ -419,6 +518,15 @@ class LocalizationStack:
         self.n_coasted = 0
         # publish_pose aligned: the last confirmed (map pose, odometry pose) it is carried from
         self._published_anchor: tuple[np.ndarray, np.ndarray] | None = None
+        # relocalize: the search (rebuilt when the map changed), the last found pose with the
+        # odometry it was found at and how many updates in a row agreed, and the restarts
+        self._reloc: Relocalizer | None = None
+        self._reloc_stale = True
+        self._reloc_found: tuple[np.ndarray, np.ndarray, int] | None = None
+        # odometry at the last update, and the travel since the filter last fitted the map
+        self._reloc_odom: np.ndarray | None = None
+        self._reloc_travel_m = 0.0
+        self.relocalizations: list[tuple[float, np.ndarray, np.ndarray]] = []  # (stamp, from, to)
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -442,6 +550,9 @@ class LocalizationStack:
         self._gatmo_last = None
         self._anchor, self._bridge, self._bridge_travel_m = None, [], 0.0
         self._published_anchor = None
+        self._reloc_found = None
+        self._reloc_stale = True
+        self._reloc_odom, self._reloc_travel_m = None, 0.0
         self._injected_seen = _injected(self.localizer)
         self._slide: deque = deque()  # (travel m, filter pose, odometry) over slide_window_m
         self._travel_m = 0.0
@@ -505,6 +616,17 @@ class LocalizationStack:
         if injected > self._injected_seen:
             self._settle_left_m = self.fusion.settle_after_jump_m
         self._injected_seen = injected
+        if self.fusion.relocalize and self.mapper is not None and getattr(est, "updated", False):
+            found = self._relocalized(masked, loc_pose, odom)
+            if found is not None:
+                self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))
+                s_xy, s_th = self.fusion.relocalize_std_xy_m, np.radians(
+                    self.fusion.relocalize_std_deg)
+                self.localizer.set_initial_pose(found, np.diag([s_xy**2, s_xy**2, s_th**2]))
+                loc_pose = found
+                self._settle_left_m = self.fusion.settle_after_jump_m
+                self.T_map_match = None  # the matcher is re-anchored on the new pose
+                self._published_anchor = None
         self._last_loc, self._last_odom = loc_pose, odom
         self._last_precise = is_confident(est, self.fusion, strict=True, require_update=False)
         self._last_confident = is_confident(est, self.fusion, require_update=False)
@@ -595,6 +717,7 @@ class LocalizationStack:
             changed = self._apply_map_changes()
             if changed and self._aligner is not None:
                 self._aligner.set_grid(self.mapper.grid())
+            self._reloc_stale = self._reloc_stale or changed
         self.n_scans += 1
         published = _wrapped(loc_pose)
         if self.fusion.publish_pose == "fused":
@@ -715,6 +838,46 @@ class LocalizationStack:
         self.n_coasted += 1
         return replace(masked, ranges_m=np.full_like(masked.ranges_m, np.nan))
 
+    def _relocalized(self, scan: Scan, loc_pose: np.ndarray,
+                     odom: np.ndarray) -> np.ndarray | None:
+        """``relocalize``: the pose to start the filter again at after this update, or None."""
+        from gatmo.scanmatch.icp import voxel_downsample
+
+        f = self.fusion
+        if self._reloc is None:
+            self._reloc = Relocalizer(f)
+        if self._reloc_stale:
+            self._reloc.set_grid(self.mapper.grid())
+            self._reloc_stale = False
+        if self._reloc_odom is not None:
+            self._reloc_travel_m += float(np.hypot(*relative(self._reloc_odom, odom)[:2]))
+        self._reloc_odom = odom.copy()
+        pts = voxel_downsample(scan.points_base_xy(), 0.05)
+        found = None
+        if self._reloc.ready and len(pts) >= f.relocalize_min_points:
+            fit = self._reloc.fit(loc_pose, pts)
+            if fit >= f.relocalize_min_fit:  # the filter fits the map here
+                self._reloc_travel_m = 0.0
+            if fit <= f.relocalize_below_fit:
+                found = self._reloc.search(loc_pose, pts)
+        if found is None:
+            self._reloc_found = None
+            return None
+        n = 1
+        if self._reloc_found is not None:  # the same place as last time, after odometry?
+            prev, prev_odom, k = self._reloc_found
+            d = relative(compose(prev, relative(prev_odom, odom)), found)
+            if np.hypot(d[0], d[1]) <= 0.2 and abs(d[2]) <= np.radians(5.0):
+                n = k + 1
+        self._reloc_found = (found, odom.copy(), n)
+        jump = float(np.hypot(*(found[:2] - loc_pose[:2])))
+        reach = f.relocalize_max_jump_m + f.relocalize_max_jump_per_m * self._reloc_travel_m
+        if n < f.relocalize_scans or not f.relocalize_min_shift_m <= jump <= reach:
+            return None
+        self._reloc_found = None
+        self._reloc_travel_m = 0.0
+        return found
+
     def _masked(self, scan: Scan) -> tuple[Scan, np.ndarray | None]:
         """The scan with the returns GATMO cannot explain set to NaN (``mask_unexplained``),
         placed from the last localizer pose moved by odometry, and which beams (B,) bool were
@@ -783,6 +946,7 @@ class LocalizationStack:
         events = list(self.mapper.end_run())
         self._apply_map_changes()
         self._aligner = None  # rebuilt from the new map on first use
+        self._reloc_stale = True
         return events
 
     def current_grid(self, base: OccupancyGrid) -> OccupancyGrid:

@@ -840,3 +840,112 @@ def test_a_loose_alignment_is_not_published(min_tight):
         for i in confirmed:
             np.testing.assert_allclose(published[i], out[i].gatmo_pose_xytheta, atol=1e-9)
         assert np.abs(published - (truth + bias)).max() > 0.02
+
+
+class StuckLocalizer:
+    """A filter locked onto a wrong place: its pose follows odometry and never corrects
+    itself; from scan ``slip_at`` on it is ``offset`` off (a slide, all at once); confident
+    throughout."""
+
+    def __init__(self, truth, offset, slip_at=0):
+        self.truth, self.offset, self.slip_at = truth, np.asarray(offset, dtype=float), slip_at
+        self.i = 0
+        self.restarted = None  # (scan index, pose)
+        self.restarts = 0
+
+    def set_initial_pose(self, pose_xytheta, cov=None):
+        self.restarted = (self.i - 1, np.asarray(pose_xytheta, dtype=float).copy())
+        self.restarts += 1
+
+    def update(self, odom, scan, withheld=None):
+        i = self.i
+        self.i += 1
+        if self.restarted is not None:  # from there on odometry (here exact) carries it
+            k, p = self.restarted
+            pose = compose(p, relative(self.truth[k], self.truth[i]))
+        else:
+            pose = self.truth[i] + (self.offset if i >= self.slip_at else 0.0)
+        return Est(pose, np.diag([0.02**2, 0.02**2, 0.01**2]))
+
+
+def _reloc_world(n=20, step_m=0.042):
+    boxes = [(1.0, 1.0, 1.6, 1.3), (3.0, 4.2, 3.4, 5.0), (5.2, 1.5, 6.2, 1.9),
+             (6.8, 3.6, 7.1, 4.4), (2.2, 2.6, 2.5, 2.9)]
+    grid = room_grid(8, 6, 0.05, boxes=boxes)
+    x = 3.0 + step_m * np.arange(n)
+    truth = np.stack([x, 3.0 + 0.3 * np.sin(x), np.full(n, 0.2)], axis=1)
+    scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0,
+                       odom_pose_xytheta=truth[i], stamp_s=0.1 * i) for i in range(n)]
+    return grid, truth, scans
+
+
+def _run_stuck(offset, slip_at, relocalize, n, step_m=0.042):
+    grid, truth, scans = _reloc_world(n, step_m)
+    loc = StuckLocalizer(truth, offset, slip_at)
+    stack = LocalizationStack(loc, None, _MapOnly(grid), FusionConfig(
+        relocalize=relocalize, use_scan_matcher=False))
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out])[:, :2]
+                     - truth[:, :2]).T)
+    return loc, stack, out, err, truth
+
+
+@pytest.mark.parametrize("offset, fires", [((0.9, -0.6, 0.1), True), ((0.0, 0.0, 0.0), False),
+                                           ((2.5, 0.0, 0.0), False)])
+@pytest.mark.parametrize("relocalize", [False, True])
+def test_a_filter_that_slid_onto_a_wrong_place_is_started_again_where_the_scan_fits(
+        offset, fires, relocalize):
+    """``relocalize``: at scan 10 the filter slides 1.1 m / 6 deg off and stays confident,
+    explaining little of the scan. A correlative search within 1.5 m finds the true pose on
+    every update, but a jump of 1.1 m is only made once the robot has travelled 0.8 m since
+    the filter last fitted the map (0.3 m + 1.0 x travel): at scan 28 (19 scans of 4.2 cm),
+    onto the truth, and GATMO then waits as after any jump. A filter on the right place is
+    never searched from; one 2.5 m off is beyond the window and stays where it is."""
+    loc, stack, out, err, truth = _run_stuck(offset, 10, relocalize, 40)
+    if relocalize and fires:
+        assert loc.restarts == 1 and len(stack.relocalizations) == 1
+        stamp, before, after = stack.relocalizations[0]
+        k = round(stamp * 10)
+        assert k == 28
+        assert np.hypot(*(after[:2] - truth[k, :2])) < 0.03
+        assert abs(after[2] - truth[k, 2]) < np.radians(1.0)
+        assert np.all(err[k:] < 0.03) and np.all(err[10:k] > 1.0) and np.all(err[:10] < 1e-9)
+        # GATMO is handed no pose for settle_after_jump_m (3 m) after it
+        assert all(o.gatmo_pose_xytheta is None for o in out[k:])
+    else:
+        assert loc.restarts == 0 and stack.relocalizations == []
+        np.testing.assert_allclose(err[10:], np.hypot(*offset[:2]), atol=1e-9)
+
+
+def test_a_run_started_from_a_given_pose_is_not_moved_farther_than_it_travelled():
+    """Off by 1.1 m from the run's first scan (the pose given for it, as pieces moved before
+    the run can make a scan fit a wrong place near a right start): within 0.65 m of travel the
+    search's pose, right here, is farther than 0.3 m + the travel and is not taken; over 1.6 m
+    it is."""
+    loc, stack, _, err, _ = _run_stuck((0.9, -0.6, 0.1), 0, True, 15)
+    assert loc.restarts == 0 and np.all(err > 1.0)
+    loc, stack, _, err, _ = _run_stuck((0.9, -0.6, 0.1), 0, True, 20, step_m=0.084)
+    assert loc.restarts == 1 and err[-1] < 0.03
+
+
+def test_relocalizer_fit_and_search_on_known_poses():
+    """The fit is the fraction of the scan's points within 0.1 m of a map edge; the search
+    finds the true pose from 1 m / 8 deg off; with a window of 0.85 or 0.95 m (the truth 0.8 m
+    away in x: on the window's edge) it finds nothing, nor from 1.75 m off."""
+    from gatmo.pipeline.stack import Relocalizer
+
+    grid, truth, scans = _reloc_world()
+    r = Relocalizer(FusionConfig())
+    r.set_grid(grid)
+    pts = scans[0].points_base_xy()
+    assert r.fit(truth[0], pts) > 0.95
+    off = truth[0] + [0.8, 0.6, np.radians(8.0)]
+    assert r.fit(off, pts) < 0.3
+    got = r.search(off, pts)
+    assert got is not None and np.hypot(*(got[:2] - truth[0, :2])) < 0.03
+    assert r.search(truth[0] + [0.0, 1.75, 0.0], pts) is None
+    for window_m in (0.85, 0.95):
+        r = Relocalizer(FusionConfig(relocalize_window_m=window_m))
+        r.set_grid(grid)
+        assert r.search(off, pts) is None
