@@ -66,6 +66,10 @@ def sim_stack_config():
                      max_particles=3000, initial_cov_xx_m2=0.1**2, initial_cov_yy_m2=0.1**2,
                      initial_cov_aa_rad2=math.radians(5.0)**2).items():
         setattr(a, k, v)
+    # a filter confident on a wrong place is started again where the map explains the scan
+    # (README, "Relocalization"): the demo's run 4 2.47 -> 0.43 m, three of 50 hall seeds
+    # better, none worse; the real logs' broad filter is never confident enough for it
+    cfg.fusion.relocalize = True
     return cfg
 
 

@@ -44,6 +44,7 @@ class RunTrace:
     ms: np.ndarray
     events: list = field(default_factory=list)
     resets: int = 0
+    relocalizations: int = 0  # the filter started again by the stack (fusion.relocalize)
     map_updates: int = 0
     # (N, 3) base poses (map frame) the stack handed GATMO as trusted; NaN rows: scans it was
     # not handed (no trusted pose; every scan on the static side); None: not recorded
@@ -196,7 +197,7 @@ def run_side(
     align_outcomes = np.full(n, "", dtype=object)
     ms = np.empty(n)
     events: list = []
-    resets = 0
+    resets = relocalizations = 0
     for i, scan in enumerate(scans):
         step = stack.step(scan)
         stamps[i] = step.stamp_s
@@ -209,6 +210,7 @@ def run_side(
         align_outcomes[i] = step.align_outcome or ""
         ms[i] = step.ms
         resets += int(step.reset)
+        relocalizations += int(getattr(step, "relocalized", False))
         for ev in step.events:
             events.append(_event_dict(ev, scan_index=i))
         if observer is not None:
@@ -233,6 +235,7 @@ def run_side(
         ms=ms,
         events=events,
         resets=resets,
+        relocalizations=relocalizations,
         map_updates=stack.n_map_updates,
         gatmo_poses_xytheta=gatmo_poses,
         gatmo_verified=gatmo_verified,
@@ -290,6 +293,7 @@ def score(trace: RunTrace, gt: GroundTruth | None, relations=None) -> dict:
         added=kinds.count("added"),
         movable=kinds.count("movable"),
         resets=trace.resets,
+        relocalizations=trace.relocalizations,
     )
     return row
 

@@ -179,25 +179,26 @@ class FusionConfig(GatmoModel):
     0.061 m / 0.94 deg) but with larger errors between resets (ATE 7-11 % higher in
     simulated offices where nothing moved).
 
-    ``relocalize`` (needs GATMO; beyond AMCL, in the spirit of slam_toolbox's localization
-    mode): a filter can be confident and wrong, its cloud too tight to reach the right place
-    again (AMCL's random particles lock onto look-alike places of a sparse hall). When the
-    filter's pose after an update explains at most ``relocalize_below_fit`` of the scan's
-    points (within ``relocalize_fit_m`` of a map edge; at least ``relocalize_min_points``
-    points), a correlative search of the current map in +- ``relocalize_window_m`` /
-    ``relocalize_window_deg`` around it, refined by ICP
-    (:func:`gatmo.scanmatch.correlative.match_to_submap`: high peak, no other place 0.3 m
-    away scoring ``relocalize_ambiguity_ratio`` of it, ICP agrees),
-    looks for a pose explaining at least ``relocalize_min_fit`` of them, and
-    ``relocalize_min_gain`` more than the filter's pose does. Found on
-    ``relocalize_scans`` updates in a row that agree after odometry (0.2 m / 5 deg), and at
-    least ``relocalize_min_shift_m`` from the filter but no farther than
+    ``relocalize`` (off by default; on in the simulated halls' configuration,
+    ``gatmo.pipeline.config.sim_stack_config``, since the twenty-fifth session; needs GATMO's
+    map and a localizer with ``set_initial_pose``; beyond AMCL, in the spirit of slam_toolbox's
+    localization mode; README, "Relocalization"): a filter can be confident and wrong, its cloud
+    too tight to reach the right place again (AMCL's random particles lock onto look-alike
+    places of a sparse hall). When a confident filter's pose (the reset test,
+    ``reset_max_std_*``; a broad cloud still reaches the right place by itself) after an update
+    explains at most ``relocalize_below_fit`` of the scan's points (within ``relocalize_fit_m``
+    of a map edge; at least ``relocalize_min_points`` points), a correlative search of the
+    current map in +- ``relocalize_window_m`` / ``relocalize_window_deg`` around it, refined by
+    ICP (:func:`gatmo.scanmatch.correlative.match_to_submap`: high peak, no other place 0.3 m
+    away scoring ``relocalize_ambiguity_ratio`` of it, ICP agrees), looks for a pose explaining
+    at least ``relocalize_min_fit`` of them, and ``relocalize_min_gain`` more than the filter's
+    pose does. Found on ``relocalize_scans`` updates in a row that agree after odometry (0.2 m /
+    5 deg), and at least ``relocalize_min_shift_m`` from the filter but no farther than
     ``relocalize_max_jump_m`` plus ``relocalize_max_jump_per_m`` times the travel since the
-    filter last explained ``relocalize_min_fit`` of a scan (or since the run's start: a
-    run's given initial pose is trusted, and pieces moved before the run fit the scan at wrong
-    places near it), the filter is started again there
-    (``relocalize_std_xy_m`` / ``relocalize_std_deg``) and GATMO waits as after any jump
-    (``settle_after_jump_m``).
+    filter last explained ``relocalize_min_fit`` of a scan (or since the run's start: a run's
+    given initial pose is trusted, and pieces moved before the run fit the scan at wrong places
+    near it), the filter is started again there (``relocalize_std_xy_m`` /
+    ``relocalize_std_deg``) and GATMO waits as after any jump (``settle_after_jump_m``).
     """
 
     use_scan_matcher: bool = True
@@ -433,6 +434,8 @@ class StackStep:
     # what the scan-to-map alignment concluded on this scan (one of ALIGN_OUTCOMES); None: it
     # did not run (no trusted pose, or align_to_map off)
     align_outcome: str | None = None
+    # relocalize: the filter was started again on this scan (at localizer_pose_xytheta)
+    relocalized: bool = False
 
 
 def _wrapped(pose_xytheta) -> np.ndarray:
@@ -616,8 +619,14 @@ class LocalizationStack:
         if injected > self._injected_seen:
             self._settle_left_m = self.fusion.settle_after_jump_m
         self._injected_seen = injected
-        if self.fusion.relocalize and self.mapper is not None and getattr(est, "updated", False):
+        relocalized = False
+        # only a confident filter (the paper's reset test) is suspected of being confident and
+        # wrong: a broad cloud still reaches the right place by itself
+        if (self.fusion.relocalize and confident
+                and callable(getattr(self.mapper, "grid", None))
+                and callable(getattr(self.localizer, "set_initial_pose", None))):
             found = self._relocalized(masked, loc_pose, odom)
+            relocalized = found is not None
             if found is not None:
                 self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))
                 s_xy, s_th = self.fusion.relocalize_std_xy_m, np.radians(
@@ -739,6 +748,7 @@ class LocalizationStack:
             gatmo_pose_xytheta=gatmo_pose,
             gatmo_pose_verified=bool(gatmo_pose is not None and verified),
             align_outcome=align_outcome,
+            relocalized=relocalized,
         )
 
     def _bridge_step(self, scan: Scan, base_ref: np.ndarray, gatmo_pose: np.ndarray | None,
