@@ -246,6 +246,9 @@ class FusionConfig(GatmoModel):
     matcher_motion_max_gap_m: float = Field(0.2, gt=0)
     matcher_motion_max_gap_deg: float = Field(10.0, gt=0)
     bridge_evidence: bool = False
+    bridge_max_closure_m: float = Field(0.02, gt=0)
+    bridge_max_closure_deg: float = Field(1.0, gt=0)
+    bridge_max_travel_m: float = Field(3.0, gt=0)
     relocalize: bool = False
     relocalize_below_fit: float = Field(0.3, ge=0, le=1)
     relocalize_min_fit: float = Field(0.5, ge=0, le=1)
@@ -261,9 +264,6 @@ class FusionConfig(GatmoModel):
     relocalize_max_jump_per_m: float = Field(1.0, ge=0)
     relocalize_std_xy_m: float = Field(0.05, gt=0)
     relocalize_std_deg: float = Field(2.0, gt=0)
-    bridge_max_closure_m: float = Field(0.02, gt=0)
-    bridge_max_closure_deg: float = Field(1.0, gt=0)
-    bridge_max_travel_m: float = Field(3.0, gt=0)
 
 
 #: what a scan-to-map alignment (:meth:`MapAligner.refine`) concluded: ``confirmed`` the pose;
