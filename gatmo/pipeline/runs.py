@@ -210,7 +210,7 @@ def run_side(
         align_outcomes[i] = step.align_outcome or ""
         ms[i] = step.ms
         resets += int(step.reset)
-        relocalizations += int(getattr(step, "relocalized", False))
+        relocalizations += int(step.relocalized)
         for ev in step.events:
             events.append(_event_dict(ev, scan_index=i))
         if observer is not None:

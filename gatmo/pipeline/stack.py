@@ -360,17 +360,20 @@ class Relocalizer:
 
     def __init__(self, fusion: FusionConfig):
         self.fusion = fusion
-        self._pts = self._tree = self._field = None
+        self._pts = self._tree = self._normals = self._field = None
 
     def set_grid(self, grid: OccupancyGrid) -> None:
         from scipy.spatial import cKDTree
 
         from gatmo.scanmatch.correlative import likelihood_field
+        from gatmo.scanmatch.icp import normals_of
 
         self._pts = _edge_points(grid)
         self._tree = cKDTree(self._pts) if len(self._pts) >= 20 else None
-        self._field = None if self._tree is None else likelihood_field(
-            self._pts, resolution_m=grid.resolution_m, sigma_m=self.fusion.relocalize_fit_m)
+        if self._tree is not None:  # once per map, not once per search
+            self._normals, _ = normals_of(self._pts, self._tree)
+            self._field = likelihood_field(self._pts, resolution_m=grid.resolution_m,
+                                           sigma_m=self.fusion.relocalize_fit_m)
 
     @property
     def ready(self) -> bool:
@@ -384,9 +387,11 @@ class Relocalizer:
                                 distance_upper_bound=self.fusion.relocalize_fit_m)
         return float(np.mean(np.isfinite(d)))
 
-    def search(self, pose_xytheta: np.ndarray, points_base_xy: np.ndarray) -> np.ndarray | None:
+    def search(self, pose_xytheta: np.ndarray, points_base_xy: np.ndarray,
+               fit_here: float | None = None) -> np.ndarray | None:
         """A pose near ``pose_xytheta`` that explains at least ``relocalize_min_fit`` of the
-        points, unambiguously; None if there is none."""
+        points, unambiguously; None if there is none. ``fit_here``: :meth:`fit` at
+        ``pose_xytheta`` if already known."""
         from gatmo.scanmatch.correlative import MatchConfig, match_to_submap
 
         f = self.fusion
@@ -397,7 +402,8 @@ class Relocalizer:
                             window_theta_rad=np.radians(f.relocalize_window_deg),
                             cfg=MatchConfig(ambiguity_theta_rad=np.pi,
                                             ambiguity_ratio=f.relocalize_ambiguity_ratio),
-                            field=self._field, target_tree=self._tree)
+                            field=self._field, target_tree=self._tree,
+                            target_normals=self._normals)
         if not m.accepted:
             return None
         # a peak on the window's edge may be the slope of one beyond it (a wall slid along)
@@ -406,9 +412,10 @@ class Relocalizer:
                 d[2] >= np.radians(f.relocalize_window_deg) - np.radians(1.0):
             return None
         pose = np.asarray(m.T_target_source, dtype=float)
-        fit = self.fit(pose, points_base_xy)
-        ok = fit >= max(f.relocalize_min_fit,
-                        self.fit(pose_xytheta, points_base_xy) + f.relocalize_min_gain)
+        if fit_here is None:
+            fit_here = self.fit(pose_xytheta, points_base_xy)
+        ok = self.fit(pose, points_base_xy) >= max(f.relocalize_min_fit,
+                                                   fit_here + f.relocalize_min_gain)
         return pose if ok else None
 
 
@@ -869,7 +876,7 @@ class LocalizationStack:
             if fit >= f.relocalize_min_fit:  # the filter fits the map here
                 self._reloc_travel_m = 0.0
             if fit <= f.relocalize_below_fit:
-                found = self._reloc.search(loc_pose, pts)
+                found = self._reloc.search(loc_pose, pts, fit)
         if found is None:
             self._reloc_found = None
             return None

@@ -202,7 +202,8 @@ class ClosureMatch:
 def match_to_submap(source_xy: np.ndarray, target_xy: np.ndarray, guess_xytheta, *,
                     window_xy_m: float, window_theta_rad: float,
                     cfg: MatchConfig | None = None, field: LikelihoodField | None = None,
-                    target_tree: cKDTree | None = None) -> ClosureMatch:
+                    target_tree: cKDTree | None = None,
+                    target_normals: np.ndarray | None = None) -> ClosureMatch:
     """Correlative search then ICP of source points (N, 2) (source base frame, m) against
     target points (M, 2) (target frame, m), around ``guess_xytheta``; accepted only if the
     search peak is high and unambiguous and ICP agrees, fits well and is not degenerate."""
@@ -227,7 +228,7 @@ def match_to_submap(source_xy: np.ndarray, target_xy: np.ndarray, guess_xytheta,
     if sr.exhausted or sr.second_score >= cfg.ambiguity_ratio * sr.score:
         return ClosureMatch(sr.T_target_source, sr, None, False, "ambiguous")
     tree = target_tree if target_tree is not None else cKDTree(target_xy)
-    normals, _ = normals_of(target_xy, tree)
+    normals = target_normals if target_normals is not None else normals_of(target_xy, tree)[0]
     r1 = icp_2d(src, target_xy, sr.T_target_source, target_tree=tree, target_normals=normals,
                 max_corr_dist_m=0.3, max_iter=20)
     r2 = icp_2d(src, target_xy, r1.T_target_source, target_tree=tree, target_normals=normals,
