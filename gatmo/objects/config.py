@@ -85,6 +85,15 @@ class GatmoConfig(GatmoModel):
         "to 70 scans to identify) false relocations per run fall 0.61 -> 0.40 (full stack, "
         "seeds 300-319) and 0.60 -> 0.45 (true poses, held-out seeds 100-109)")
     chair_min_cells: int = Field(6, ge=1)
+    still_to_gamma: bool = Field(
+        False, description="beyond the paper: a track called a person for its motion alone "
+        "(its centre travelled) whose evidence is concentrated (still_min_concentration) joins "
+        "Gamma when it ends, as a chair would, without being matched: two pieces side by side "
+        "seen in turn from a moving robot, whose centre wanders farther than a piece's size")
+    still_min_concentration: float = Field(
+        0.9, gt=0, le=1, description="share of a track's evidence on cells hit in "
+        "still_min_hits scans or more that makes it still")
+    still_min_hits: int = Field(3, ge=2, description="hits that make a cell's evidence firm")
     chair_max_speed_mps: float = Field(0.15, gt=0)
     chair_align_cells: int = Field(
         0, ge=0, description="beyond the paper: each new observation is shifted by up to this "

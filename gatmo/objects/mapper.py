@@ -301,6 +301,8 @@ class GatmoMapper:
             if m.dominant() == "chair" and m.matched_object is None and not self._settle(
                     m, m.last_seen, events):
                 self._to_gamma(m, m.last_seen, events)
+            elif self.cfg.still_to_gamma and m.matched_object is None and m.still_though_moving():
+                self._to_gamma(m, m.last_seen, events)
         self._meta = []
         self._run_open = False  # the provisional landmarks leave the localizer's map
         # only what a track of this run saw: the tests below count this run's rays, and a thing
@@ -1475,7 +1477,10 @@ class GatmoMapper:
                 keep.append(m)
                 continue
             dom = m.dominant()
-            if dom == "person":
+            if (dom == "person" and self.cfg.still_to_gamma and m.matched_object is None
+                    and m.still_though_moving()):
+                self._to_gamma(m, stamp_s, events)
+            elif dom == "person":
                 self.counts["persons"] += 1
             elif dom == "chair" and m.matched_object is None and not self._settle(
                     m, stamp_s, events):

@@ -266,6 +266,49 @@ def test_person_hypothesis_wins_for_walking_legs_and_chair_for_a_still_box():
     assert chair.dominant() == "chair"
 
 
+def _two_pieces_track(cfg, origin_xy=(0.0, 0.0)) -> Metaobject:
+    """One track of a box and a chair 1.2 m apart seen by a robot driving past: first only the
+    box, then both, then only the chair (12 scans each)."""
+    box = np.stack([np.linspace(0.0, 0.5, 11), np.zeros(11)], 1) + origin_xy
+    chair = np.stack([np.linspace(1.2, 1.9, 15), np.full(15, 0.1)], 1) + origin_xy
+    views = [box] * 12 + [np.vstack([box, chair])] * 12 + [chair] * 12
+    rng = np.random.default_rng(2)
+    m = Metaobject(1, views[0], 0.0, cfg, 0.05)
+    for k, v in enumerate(views[1:], start=1):
+        m.update(v + rng.normal(0.0, 0.005, v.shape), 0.1 * k)
+    return m
+
+
+def test_two_still_pieces_seen_in_turn_are_still_though_the_centre_wanders():
+    """The centre of what is seen of the two pieces wanders 1.3 m, which calls the track a
+    person; its evidence stays on the same cells scan after scan (``still_min_concentration``),
+    so it is a still thing called a person for its motion. A walking person is not."""
+    m = _two_pieces_track(CFG)
+    assert m.travel_m() > 1.2 and m.dominant() == "person"
+    assert m.concentration() > 0.9 and m.still_though_moving()
+    walker = Metaobject(2, _legs(0.0), 0.0, CFG, 0.05)
+    for k in range(1, 36):
+        walker.update(_legs(0.1 * k), 0.1 * k)
+    assert walker.dominant() == "person" and walker.concentration() < 0.5
+    assert not walker.still_though_moving()
+
+
+@pytest.mark.parametrize("still_to_gamma", [False, True])
+def test_still_pieces_called_a_person_join_gamma_with_still_to_gamma(still_to_gamma):
+    """Such a track, ending with the run, becomes a new object with ``still_to_gamma`` (the
+    map then has the two pieces' faces for the localizer); without it, it is dropped as a
+    person."""
+    m = GatmoMapper.from_config(CFG.model_copy(update={"still_to_gamma": still_to_gamma}),
+                                room_grid(10, 6, 0.05))
+    m.begin_run(1)
+    m._meta.append(_two_pieces_track(m.cfg, origin_xy=(4.0, 3.0)))
+    kinds = [e.kind for e in m.end_run()]
+    assert kinds == (["gamma", "added"] if still_to_gamma else [])
+    if still_to_gamma:
+        (new,) = m.object_map.M
+        assert np.all(np.abs(new.cells_world().mean(axis=0) - [5.0, 3.05]) < 0.4)
+
+
 def test_chair_evidence_is_aligned_against_pose_jitter():
     """A still L-shaped piece seen 20 times from poses off by a few cm, a different offset each
     scan: aligned onto the evidence (``chair_align_cells``), the grid keeps the outline; without,
