@@ -1496,6 +1496,13 @@ class GatmoMapper:
             # confirmed; a confidently wrong filter makes furniture out of walls
             self.counts["gamma_unverified"] += 1
             return
+        gap = self.cfg.gamma_split_gap_m
+        for part in ([pts] if gap is None else _split_cells(pts, self._grid.resolution_m, gap)):
+            if len(part) >= self.cfg.chair_min_cells:
+                self._gamma_part(part, stamp_s, events)
+
+    def _gamma_part(self, pts: np.ndarray, stamp_s, events) -> None:
+        """Cells ``pts`` (P, 2) of a chair become a Gamma object, or join the one they overlap."""
         # a part of an object the map already has where it stands (seen before it was placed
         # there) is no new object
         near, _ = self._explained(pts)
@@ -1561,6 +1568,22 @@ def _ray_ends(lp, scan: Scan, pts: np.ndarray, cap_m: float,
         a = lp[2] + scan.angles_rad[none]
         ends = np.vstack([ends, lp[:2] + none_r * np.stack([np.cos(a), np.sin(a)], axis=1)])
     return ends
+
+
+def _split_cells(points_xy: np.ndarray, resolution_m: float, gap_m: float) -> list[np.ndarray]:
+    """``points_xy`` (P, 2), cell centres, grouped into 8-connected components after closing
+    gaps of up to ``gap_m`` (binary dilation by half of it, rounded up to a cell)."""
+    keys = np.floor(points_xy / resolution_m).astype(np.int64)
+    lo = keys.min(axis=0)
+    r = int(np.ceil(gap_m / (2 * resolution_m)))
+    ij = keys - lo + r
+    mask = np.zeros(tuple(ij.max(axis=0) + r + 1)[::-1], dtype=bool)
+    mask[ij[:, 1], ij[:, 0]] = True
+    grown = ndimage.binary_dilation(mask, structure=np.ones((3, 3), bool), iterations=r) \
+        if r > 0 else mask
+    labels, n = ndimage.label(grown, structure=np.ones((3, 3), bool))
+    lab = labels[ij[:, 1], ij[:, 0]]
+    return [points_xy[lab == k] for k in range(1, n + 1) if np.any(lab == k)]
 
 
 def _inner_cells(o: MapObject) -> np.ndarray:

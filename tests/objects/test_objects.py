@@ -494,6 +494,29 @@ def test_pose_scoring_kernel_agrees_with_numpy_reference():
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
 
 
+def test_gamma_split_parts_a_chair_of_two_pieces_side_by_side():
+    """``gamma_split_gap_m``: the cells of the two-piece track above, 0.7 m apart, become two
+    Gamma objects (each then matched or added on its own); an outline broken by one missing
+    cell stays one; off, one object."""
+    from gatmo.objects.mapper import _split_cells
+
+    pts = _two_pieces_track(CFG, origin_xy=(4.0, 3.0)).chair_points()
+    parts = _split_cells(pts, 0.05, 0.1)
+    box, chair = sorted(parts, key=lambda p: p[:, 0].min())
+    assert box[:, 0].max() < 4.7 and chair[:, 0].min() > 5.0  # box 4.0-4.5, chair 5.2-5.9
+    broken = np.stack([np.r_[np.arange(0, 10), np.arange(11, 20)] * 0.05 + 0.025,
+                       np.full(19, 0.025)], 1)
+    assert len(_split_cells(broken, 0.05, 0.1)) == 1
+    for gap, n in ((None, 1), (0.1, 2)):
+        m = GatmoMapper.from_config(CFG.model_copy(update={"still_to_gamma": True,
+                                                           "gamma_split_gap_m": gap}),
+                                    room_grid(10, 6, 0.05))
+        m.begin_run(1)
+        m._meta.append(_two_pieces_track(m.cfg, origin_xy=(4.0, 3.0)))
+        kinds = [e.kind for e in m.end_run()]
+        assert kinds.count("gamma") == n and kinds.count("added") == n
+
+
 def test_a_new_object_seen_by_two_tracks_is_added_once():
     # a box the map does not have, seen twice with 5 s in between (longer than tau_memory): two
     # metaobjects expire into Gamma at the same place; they are one object, added once
