@@ -298,11 +298,7 @@ class GatmoMapper:
         events: list[Event] = []
         self.flicker = {}
         for m in self._meta:
-            if m.dominant() == "chair" and m.matched_object is None and not self._settle(
-                    m, m.last_seen, events):
-                self._to_gamma(m, m.last_seen, events)
-            elif self.cfg.still_to_gamma and m.matched_object is None and m.still_though_moving():
-                self._to_gamma(m, m.last_seen, events)
+            self._end_track(m, m.last_seen, events)
         self._meta = []
         self._run_open = False  # the provisional landmarks leave the localizer's map
         # only what a track of this run saw: the tests below count this run's rays, and a thing
@@ -1476,16 +1472,26 @@ class GatmoMapper:
             if stamp_s - m.last_seen <= self.cfg.tau_memory_s:
                 keep.append(m)
                 continue
-            dom = m.dominant()
-            if (dom == "person" and self.cfg.still_to_gamma and m.matched_object is None
-                    and m.still_though_moving()):
-                self._to_gamma(m, stamp_s, events)
-            elif dom == "person":
+            if m.dominant() == "person" and not self._still_person(m):
                 self.counts["persons"] += 1
-            elif dom == "chair" and m.matched_object is None and not self._settle(
-                    m, stamp_s, events):
-                self._to_gamma(m, stamp_s, events)
+            else:
+                self._end_track(m, stamp_s, events)
         self._meta = keep
+
+    def _still_person(self, m: Metaobject) -> bool:
+        """With ``still_to_gamma``: ``m``, unmatched, is a still thing called a person for its
+        motion (:meth:`Metaobject.still_though_moving`)."""
+        return (self.cfg.still_to_gamma and m.matched_object is None
+                and m.still_though_moving())
+
+    def _end_track(self, m: Metaobject, stamp_s, events) -> None:
+        """Track ``m`` ends (expired, or the run's end): an unmatched chair (unless it settles
+        a held-back match now) or a still thing called a person joins Gamma."""
+        if m.matched_object is not None:
+            return
+        if self._still_person(m) or (m.dominant() == "chair"
+                                     and not self._settle(m, stamp_s, events)):
+            self._to_gamma(m, stamp_s, events)
 
     def _to_gamma(self, m: Metaobject, stamp_s, events) -> None:
         pts = m.chair_points()
@@ -1583,7 +1589,7 @@ def _split_cells(points_xy: np.ndarray, resolution_m: float, gap_m: float) -> li
         if r > 0 else mask
     labels, n = ndimage.label(grown, structure=np.ones((3, 3), bool))
     lab = labels[ij[:, 1], ij[:, 0]]
-    return [points_xy[lab == k] for k in range(1, n + 1) if np.any(lab == k)]
+    return [points_xy[lab == k] for k in range(1, n + 1)]  # each holds a point it grew from
 
 
 def _inner_cells(o: MapObject) -> np.ndarray:
