@@ -1,8 +1,9 @@
 """Paired comparison of two benchmark runs over the same seeds (benchmarks.paired)."""
 
 import numpy as np
+import pytest
 
-from benchmarks.paired import ORACLE_FIGURES, SIM_FIGURES, paired, per_seed
+from benchmarks.paired import ORACLE_FIGURES, SIM_FIGURES, paired, per_seed, pooled
 
 
 def _sim_row(seed, found, moved=10, frel=0):
@@ -33,3 +34,27 @@ def test_oracle_rows_are_summed_per_seed_over_the_pieces_seen_at_both_places():
     assert by_seed[2]["wrong"] == 1 and by_seed[2]["both"] == 1
     (found, *_) = paired(by_seed, by_seed, figures)
     assert found["b_minus_a"] == 0.0 and found["ci95"] == [0.0, 0.0]
+
+
+def _doc(draw, found):
+    """A bench_gatmo_sim output with filter seed ``draw``: ``found`` per hall seed 0, 1, ..."""
+    rows = [_sim_row(s, f) for s, f in enumerate(found)]
+    return {"rows": rows, "total": {"overrides": [f"seed={draw}"] if draw else []}}
+
+
+def test_filter_draws_pool_into_rows_per_seed_and_draw_resampled_by_whole_seeds():
+    a, b, figures = pooled([(_doc(0, [2, 3]), _doc(0, [3, 3])),
+                            (_doc(10, [2, 4]), _doc(10, [4, 4]))])
+    assert sorted(a) == [(0, 0), (0, 10), (1, 0), (1, 10)] and figures is SIM_FIGURES
+    found = paired(a, b, figures)[0]
+    assert abs(found["b_minus_a"] - 3 / 40) < 1e-12  # 11 -> 14 found of 40 moved
+    assert found["seeds_higher"] == 2 and found["seeds_lower"] == 0 and found["seeds"] == 4
+    # one seed whose two draws differ by +1 and -1: resampling whole seeds always takes both
+    # (B - A = 0 every time); resampling rows alone would give -0.1 to +0.1
+    a, b, _ = pooled([(_doc(0, [2]), _doc(0, [3])), (_doc(10, [2]), _doc(10, [1]))])
+    assert paired(a, b, figures)[0]["ci95"] == [0.0, 0.0]
+
+
+def test_pairs_of_runs_with_different_filter_seeds_are_refused():
+    with pytest.raises(ValueError, match="different filter seeds"):
+        pooled([(_doc(0, [2]), _doc(0, [2])), (_doc(10, [2]), _doc(20, [2]))])
