@@ -240,8 +240,9 @@ class GatmoConfig(GatmoModel):
         None, gt=0, description="beyond the paper: a chair's cells more than this apart "
         "(8-connected after closing gaps up to it) become separate Gamma objects, as region "
         "growing splits the static map; two pieces side by side seen as one track. None: one "
-        "object per track. At 0.1 (tuning seeds 300-319): false relocations 1.05 -> 0.90 per "
-        "seed, found 17.3 -> 17.8 %, but full-stack ATE 0.140 -> 0.156 m (314 lost 17 %)")
+        "object per track. At 0.1: tuning seeds 300-319 false relocations 1.05 -> 0.90 per "
+        "seed; held-out hall seeds 400-419 over three filter draws ATE 0.152 -> 0.156 m and "
+        "false relocations 1.22 -> 1.27 per seed, offices one find fewer (docs/experiments.md)")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
     match_gamma_to_absent: bool = Field(

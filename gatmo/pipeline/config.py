@@ -50,14 +50,15 @@ def sim_stack_config():
     laser weights (z_hit 0.95, z_rand 0.05) and odometry noise matched to the simulator's
     (Thrun's alphas 0.05 / 0.01 / 0.05 / 0.01, ``SimConfig.odom``; until 2026-11-27 alpha2 and
     alpha4 were 0.05, which let the cloud's heading wander about 3x faster per metre than the
-    simulated wheels' and a moved piece in view pull it along: README, twentieth session).
+    simulated wheels' and a moved piece in view pull it along: docs/history.md, "The filter's
+    odometry noise").
     The initial pose is the simulator's true start, so the initial cloud is 0.1 m / 5 deg
     (std), not AMCL's 0.5 m / 15 deg for a pose clicked in a viewer: with this sharp model the
     first update collapsed a 0.5 m cloud onto a wrong place 0.9-1.9 m off in 8 of 20 runs of
     a rearranged hall, for both sides alike.
     ``amcl.min_explained_beam_fraction`` (off here): measured at 0.5 on 40 hall seeds it
     helps the static localizer (time lost 24.6 % -> 17.9 %) and leaves the full stack where it
-    was (5.9 % -> 5.6 %; worse on seeds 200-209, 10.2 % -> 13.0 %); see the README."""
+    was (5.9 % -> 5.6 %; worse on seeds 200-209, 10.2 % -> 13.0 %); see docs/history.md."""
     cfg = StackConfig()
     a = cfg.amcl
     for k, v in dict(laser_model="likelihood_field_prob", sigma_hit_m=0.1,
@@ -67,12 +68,12 @@ def sim_stack_config():
                      initial_cov_aa_rad2=math.radians(5.0)**2).items():
         setattr(a, k, v)
     # a filter confident on a wrong place is started again where the map explains the scan
-    # (README, "Relocalization"): the demo's run 4 2.47 -> 0.43 m, three of 50 hall seeds
-    # better, none worse; the real logs' broad filter is never confident enough for it
+    # (docs/history.md, "Relocalization"): the demo's run 4 2.47 -> 0.43 m, three of 50 hall
+    # seeds better, none worse; the real logs' broad filter is never confident enough for it
     cfg.fusion.relocalize = True
     # a sofa driven past, or two pieces side by side seen in turn, is still though the centre
-    # of what is seen wanders (README, "Still things that GATMO called persons"): hall seed
-    # 416 1.74 -> 0.55 m, five of 50 seeds 7-20 mm worse; the real logs identical
+    # of what is seen wanders (docs/history.md, "Still things that GATMO called persons"): hall
+    # seed 416 1.74 -> 0.55 m, five of 50 seeds 7-20 mm worse; the real logs identical
     cfg.gatmo.still_to_gamma = True
     return cfg
 

@@ -182,8 +182,8 @@ class FusionConfig(GatmoModel):
     ``relocalize`` (off by default; on in the simulated halls' configuration,
     ``gatmo.pipeline.config.sim_stack_config``, since the twenty-fifth session; needs GATMO's
     map and a localizer with ``set_initial_pose``; beyond AMCL, in the spirit of slam_toolbox's
-    localization mode; README, "Relocalization"): a filter can be confident and wrong, its cloud
-    too tight to reach the right place again (AMCL's random particles lock onto look-alike
+    localization mode; docs/history.md, "Relocalization"): a filter can be confident and wrong,
+    its cloud too tight to reach the right place again (AMCL's random particles lock onto look-alike
     places of a sparse hall). When a confident filter's pose (the reset test,
     ``reset_max_std_*``; a broad cloud still reaches the right place by itself) after an update
     explains at most ``relocalize_below_fit`` of the scan's points (within ``relocalize_fit_m``

@@ -122,7 +122,7 @@ def test_traces_keep_the_poses_gatmo_was_given(scen, tmp_path):
 def test_the_simulated_configuration_models_the_simulators_odometry_noise(preset):
     # both localizers of a simulated compare assume the wheels' noise the simulator draws
     # (Thrun's alphas): a filter whose heading may wander faster than the robot's lets a moved
-    # piece in view pull it along (README, twentieth session)
+    # piece in view pull it along (docs/history.md, "The filter's odometry noise")
     from gatmo.pipeline.config import sim_stack_config
 
     amcl, odom = sim_stack_config().amcl, SimConfig.for_preset(preset).odom
