@@ -39,13 +39,11 @@ MARGIN = 0.01
 def pairs(docs: list[dict]) -> list[dict]:
     """One record per (hall seed, draw) from ``bench_gatmo_sim`` outputs: the draw's filter
     seed (its ``seed=`` override, 0 when none), time lost and ATE of both sides."""
+    from benchmarks.paired import draw_of
+
     out = []
     for doc in docs:
-        draw = 0
-        for kv in doc["total"].get("overrides") or []:
-            key, _, value = kv.partition("=")
-            if key.strip() == "seed":
-                draw = int(value)
+        draw = draw_of(doc)
         for r in doc["rows"]:
             out.append({"seed": r["seed"], "draw": draw,
                         "static_lost": r["static_lost"], "gatmo_lost": r["gatmo_lost"],

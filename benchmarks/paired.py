@@ -78,8 +78,9 @@ def paired(a: dict, b: dict, figures, draws: int = 2000, seed: int = 0) -> list[
         clusters.setdefault(k[0] if isinstance(k, tuple) else k, []).append(i)
     groups = list(clusters.values())
     rng = np.random.default_rng(seed)
-    picks = [[i for g in rng.integers(len(groups), size=len(groups)) for i in groups[g]]
-             for _ in range(draws)]
+    # one call, as before draws were pooled: with one row per seed the intervals are the same
+    picks = [[i for g in gs for i in groups[g]]
+             for gs in rng.integers(len(groups), size=(draws, len(groups)))]
     out = []
     for name, num, den in figures:
         ra = [a[k] for k in keys]
