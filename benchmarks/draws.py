@@ -30,6 +30,8 @@ import argparse
 import json
 from pathlib import Path
 
+from benchmarks.paired import draw_of
+
 #: share of a seed's time lost at which a side counts as lost in that draw
 LOST_SHARE = 0.05
 #: time lost (share) by which the full stack must exceed the static localizer to be "worse"
@@ -39,8 +41,6 @@ MARGIN = 0.01
 def pairs(docs: list[dict]) -> list[dict]:
     """One record per (hall seed, draw) from ``bench_gatmo_sim`` outputs: the draw's filter
     seed (its ``seed=`` override, 0 when none), time lost and ATE of both sides."""
-    from benchmarks.paired import draw_of
-
     out = []
     for doc in docs:
         draw = draw_of(doc)
@@ -49,6 +49,11 @@ def pairs(docs: list[dict]) -> list[dict]:
                         "static_lost": r["static_lost"], "gatmo_lost": r["gatmo_lost"],
                         "static_ate_m": r["static_ate_m"], "gatmo_ate_m": r["gatmo_ate_m"]})
     return out
+
+
+def worse(r: dict, margin: float = MARGIN) -> bool:
+    """The full stack lost more of the time than the static localizer, by over ``margin``."""
+    return r["gatmo_lost"] > r["static_lost"] + margin
 
 
 def count(records: list[dict], lost_share: float = LOST_SHARE,
@@ -65,7 +70,7 @@ def count(records: list[dict], lost_share: float = LOST_SHARE,
         n["gatmo_lost"] += g_lost
         n["both_lost"] += s_lost and g_lost
         n["new_lost"] += g_lost and not s_lost
-        if r["gatmo_lost"] > r["static_lost"] + margin:
+        if worse(r, margin):
             n["worse"] += 1
             worse_by_seed.setdefault(r["seed"], []).append(r["draw"])
     n["draws"] = sorted({r["draw"] for r in records})
@@ -82,7 +87,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv or [])
     records = pairs([json.loads(p.read_text()) for p in args.runs])
     for r in sorted(records, key=lambda r: (r["seed"], r["draw"])):
-        flag = " worse" if r["gatmo_lost"] > r["static_lost"] + args.margin else ""
+        flag = " worse" if worse(r, args.margin) else ""
         print(f"seed {r['seed']} draw {r['draw']:>3}: lost static {r['static_lost']:.3f} "
               f"full {r['gatmo_lost']:.3f}  ATE static {r['static_ate_m']:.3f} m "
               f"full {r['gatmo_ate_m']:.3f} m{flag}")
