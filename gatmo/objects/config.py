@@ -152,6 +152,16 @@ class GatmoConfig(GatmoModel):
     match_ambiguity_settle: bool = Field(
         True, description="a chair whose match waited on ambiguity and that leaves (not seen "
         "for tau_memory, or the run ends) takes its best match then, as without the wait")
+    match_ambiguous_min_score: float | None = Field(
+        None, gt=0, le=1, description="beyond the paper: a chair whose match waited on "
+        "ambiguity (match_ambiguity_wait) and is made anyway (after "
+        "match_ambiguity_patience_scans, or settled as it leaves) needs this edge score, "
+        "not only match_min_score; None: off. GATMO fed the true poses (hall seeds 300-309), "
+        "such matches scored 0.82-0.88 when right and 0.75-0.82 for 9 of 12 wrong ones; at "
+        "0.82 false relocations fell 32 -> 20 and finds rose 58 -> 61. In the full stack the "
+        "right ones score lower (0.76-0.88): halls 400-419 over three filter draws, false "
+        "relocations 1.22 -> 0.87 per seed, but found 17.2 % -> 14.1 % (twenty-eighth "
+        "session, docs/experiments.md)")
     match_settle_min_edge_fraction: float = Field(
         0.3, ge=0, description="beyond the paper: a match settled as the track leaves "
         "(match_ambiguity_settle) needs this many chair cells per edge cell of the object; "

@@ -135,7 +135,7 @@ class GatmoMapper:
                        "skipped_disagreement": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
                        "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0,
-                       "absent_to_gamma": 0, "settle_refused": 0}
+                       "absent_to_gamma": 0, "settle_refused": 0, "ambiguous_refused": 0}
         self._ms: list[float] = []
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
@@ -1241,6 +1241,12 @@ class GatmoMapper:
                 and m.n_obs < self.cfg.match_ambiguity_patience_scans
                 and self._ambiguous(m, o, mt, view)):
             m.waited = True
+            return False
+        floor = self.cfg.match_ambiguous_min_score
+        if m.waited and floor is not None and mt.score < floor:
+            # made despite the ambiguity: a rival shape fit nearly as well all along, and a
+            # fit this loose was as often another piece (or a new one) as this object
+            self.counts["ambiguous_refused"] += 1
             return False
         patient = m.n_obs < self.cfg.match_patience_scans
         if patient:

@@ -1402,3 +1402,44 @@ def test_an_absence_takes_a_gamma_corner_only_if_no_other_shape_fits_it(to_gamma
     if relocated:  # the cabinet's corner on the seen corner
         corner = transform_points(cab.pose_xytheta, cab.shape_xy)
         assert np.min(np.hypot(*(corner - (5.0, 1.0)).T)) < 0.08
+
+
+@pytest.mark.parametrize(("floor", "relocated"), [(None, True), (0.9, True), (0.97, False)])
+def test_a_match_made_despite_ambiguity_needs_match_ambiguous_min_score(floor, relocated):
+    # the settled case above: the near half of a desk fits the absent box (edge score 0.93)
+    # and the unseen desk nearly as well, so the match waits and is settled as the run ends.
+    # A match made despite the ambiguity must reach match_ambiguous_min_score
+    cfg = CFG.model_copy(update={"track_range_margin_m": 0.0, "match_ambiguity_wait": True,
+                                 "match_ambiguity_patience_scans": 100,
+                                 "match_ambiguity_settle": True,
+                                 "match_ambiguous_min_score": floor})
+    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
+    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
+    m = GatmoMapper.from_config(cfg, g)
+    m.begin_run(1)
+    box = min((o for o in m.object_map.objects if not o.structure), key=lambda o: len(o.shape_xy))
+    path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]
+    path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)][:40]
+    events = _drive(m, world, path, max_range_m=4.0) + m.end_run()
+    rel = [e for e in events if e.kind == "relocated" and e.object_id == box.id]
+    assert bool(rel) == relocated, [(e.kind, e.object_id) for e in events]
+    if rel:
+        assert 0.9 <= rel[0].score < 0.97
+    assert (m.counts["ambiguous_refused"] > 0) == (not relocated)
+
+
+def test_match_ambiguous_min_score_leaves_an_unambiguous_match_alone():
+    # the box moved to a free spot: nothing else in the map fits what is seen of it, so the
+    # match never waits and a floor above its score does not apply
+    cfg = CFG.model_copy(update={"match_ambiguous_min_score": 0.99})
+    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
+    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.4, 4.6)])
+    m = GatmoMapper.from_config(cfg, g)
+    m.begin_run(1)
+    box = min((o for o in m.object_map.objects if not o.structure), key=lambda o: len(o.shape_xy))
+    path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]
+    path += [(x, 3.0, 0.3) for x in np.linspace(1.5, 3.5, 50)]
+    events = _drive(m, world, path, max_range_m=4.0) + m.end_run()
+    rel = [e for e in events if e.kind == "relocated" and e.object_id == box.id]
+    assert rel and rel[0].score < 0.99
+    assert m.counts["ambiguous"] == m.counts["ambiguous_refused"] == 0
