@@ -138,6 +138,22 @@ def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, re
     assert (("relocated", box.id) in kinds) == relocated
 
 
+def _desk_half_for_a_box(n_desk: int, **update):
+    """(mapper, the box, path, world): a 0.5 m box gone from the map, a desk the map has out of
+    sight, and the same desk standing elsewhere, its near half in reach of a 4 m laser for
+    ``n_desk`` scans of the path; ``update``: GatmoConfig fields beyond the defaults."""
+    cfg = CFG.model_copy(update={"track_range_margin_m": 0.0,
+                                 "match_ambiguity_patience_scans": 100, **update})
+    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
+    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
+    m = GatmoMapper.from_config(cfg, g)
+    m.begin_run(1)
+    box = min((o for o in m.object_map.objects if not o.structure), key=lambda o: len(o.shape_xy))
+    path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]  # sees the box gone
+    path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)][:n_desk]  # past the desk's end
+    return m, box, path, world
+
+
 @pytest.mark.parametrize(("wait", "settle", "rivals", "n_desk", "relocated", "settle_frac"), [
     (False, False, "unseen", 60, True, 0.3), (True, False, "unseen", 60, False, 0.3),
     (True, True, "unseen", 60, False, 0.3), (False, False, "unseen", 40, True, 0.3),
@@ -154,18 +170,9 @@ def test_a_chair_that_fits_an_unseen_piece_of_another_shape_waits(wait, settle, 
     # A desk that never moved is no rival with match_ambiguity_rivals: movable. Settling
     # needs match_settle_min_edge_fraction of the box's outline seen: the desk's near half,
     # 0.4 of it in chair cells, passes 0.3 (the default) and not 0.8
-    cfg = CFG.model_copy(update={"track_range_margin_m": 0.0, "match_ambiguity_wait": wait,
-                                 "match_ambiguity_patience_scans": 100,
-                                 "match_ambiguity_settle": settle,
-                                 "match_settle_min_edge_fraction": settle_frac,
-                                 "match_ambiguity_rivals": rivals})
-    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
-    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
-    m = GatmoMapper.from_config(cfg, g)
-    m.begin_run(1)
-    box = min((o for o in m.object_map.objects if not o.structure), key=lambda o: len(o.shape_xy))
-    path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]  # sees the box gone
-    path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)][:n_desk]  # past the desk's end
+    m, box, path, world = _desk_half_for_a_box(
+        n_desk, match_ambiguity_wait=wait, match_ambiguity_settle=settle,
+        match_settle_min_edge_fraction=settle_frac, match_ambiguity_rivals=rivals)
     kinds = [(e.kind, e.object_id) for e in _drive(m, world, path, max_range_m=4.0)]
     assert kinds[0] == ("absent", box.id)
     kinds += [(e.kind, e.object_id) for e in m.end_run()]
@@ -1409,17 +1416,9 @@ def test_a_match_made_despite_ambiguity_needs_match_ambiguous_min_score(floor, r
     # the settled case above: the near half of a desk fits the absent box (edge score 0.93)
     # and the unseen desk nearly as well, so the match waits and is settled as the run ends.
     # A match made despite the ambiguity must reach match_ambiguous_min_score
-    cfg = CFG.model_copy(update={"track_range_margin_m": 0.0, "match_ambiguity_wait": True,
-                                 "match_ambiguity_patience_scans": 100,
-                                 "match_ambiguity_settle": True,
-                                 "match_ambiguous_min_score": floor})
-    g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
-    world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
-    m = GatmoMapper.from_config(cfg, g)
-    m.begin_run(1)
-    box = min((o for o in m.object_map.objects if not o.structure), key=lambda o: len(o.shape_xy))
-    path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]
-    path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)][:40]
+    m, box, path, world = _desk_half_for_a_box(
+        40, match_ambiguity_wait=True, match_ambiguity_settle=True,
+        match_ambiguous_min_score=floor)
     events = _drive(m, world, path, max_range_m=4.0) + m.end_run()
     rel = [e for e in events if e.kind == "relocated" and e.object_id == box.id]
     assert bool(rel) == relocated, [(e.kind, e.object_id) for e in events]
