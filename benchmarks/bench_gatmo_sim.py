@@ -95,8 +95,9 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     is right, the identity swapped); wrong: its object relocated elsewhere; absent: noticed
     gone, not found; missed), whether the robot could have found it (``observed``: both its
     old place seen through and its new place seen, from the true poses: "both", "old", "new",
-    "none"), for relocations the scan index at which it happened, and the evidence GATMO had
-    of it (:func:`piece_evidence`)."""
+    "none"), for relocations the scan index at which it happened, the matching tests that
+    refused a chair as its object that run (``refusals``: test -> count), and the evidence
+    GATMO had of it (:func:`piece_evidence`)."""
     from gatmo.maps.object_io import load_objects
     from gatmo.pipeline.evaluate import observed, piece_outcome, piece_views, tie_objects
     from gatmo.pipeline.runs import load_scans
@@ -127,6 +128,7 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
                         "observed": observed(scans, prev[c["id"]], cur.get(c["id"]),
                                              views=views),
                         "scan": rel[-1]["scan_index"] if rel else None,
+                        "refusals": refusals_of(trace.refusals, o.id),
                         **piece_evidence(views[0] | views[1], trace, gt)})
         prev = cur
     return out
@@ -147,6 +149,31 @@ def piece_evidence(seen: np.ndarray, trace, gt_xytheta: np.ndarray) -> dict:
             "views_confirmed": int(confirmed.sum()),
             "views_not_converged": int((seen & (trace.align_outcomes == "not_converged")).sum()),
             "confirmed_error_m": round(float(np.median(err)), 4) if len(err) else None}
+
+
+def refusals_of(refusals: dict, object_id: int) -> dict:
+    """Of a run's refusals ((object id, test) -> count, ``RunTrace.refusals``), those of one
+    object: test -> count."""
+    return {test: n for (oid, test), n in sorted(refusals.items()) if oid == object_id}
+
+
+def refusals_by_outcome(outcomes: list[dict]) -> dict:
+    """Over pieces seen at both places and not found (noticed gone, or missed): per outcome,
+    how many, how many no chair was ever refused as (``never_refused``: no track was tested
+    against the object that run), and per matching test how many were refused by it at least
+    once (a piece refused by several tests counts under each)."""
+    out = {}
+    for kind in ("absent", "missed"):
+        pieces = [o for o in outcomes if o["observed"] == "both" and o["outcome"] == kind
+                  and "refusals" in o]
+        tests: dict[str, int] = {}
+        for o in pieces:
+            for test in o["refusals"]:
+                tests[test] = tests.get(test, 0) + 1
+        out[kind] = {"pieces": len(pieces),
+                     "never_refused": sum(not o["refusals"] for o in pieces),
+                     "refused_by": dict(sorted(tests.items(), key=lambda kv: -kv[1]))}
+    return out
 
 
 def evidence_by_outcome(outcomes: list[dict]) -> dict:
@@ -285,6 +312,7 @@ def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
         len(seen_old), 1)
     total["table_ii"] = table_ii(rows)
     total["evidence_seen_both"] = evidence_by_outcome([o for r in rows for o in r["outcomes"]])
+    total["refusals_seen_both"] = refusals_by_outcome([o for r in rows for o in r["outcomes"]])
     return total
 
 

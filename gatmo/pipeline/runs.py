@@ -54,6 +54,9 @@ class RunTrace:
     # (gatmo.pipeline.stack.ALIGN_OUTCOMES, "" where it did not run); None: not recorded
     gatmo_verified: np.ndarray | None = None
     align_outcomes: np.ndarray | None = None
+    # (object id, test) -> how often GATMO refused a chair as that object this run, by the
+    # matching test that refused it (GatmoMapper.refusals); empty on the static side
+    refusals: dict = field(default_factory=dict)
 
     def mean_ms(self) -> float:
         return float(np.mean(self.ms)) if len(self.ms) else float("nan")
@@ -223,6 +226,8 @@ def run_side(
         events.append(_event_dict(ev, scan_index=n))
     if n:
         ms[-1] += (time.perf_counter() - t0) * 1e3
+    mapper = getattr(stack, "mapper", None)
+    refusals = dict(mapper.refusals) if mapper is not None else {}
     if observer is not None:
         observer.on_run_end(side, stack, end_events)
     return RunTrace(
@@ -240,6 +245,7 @@ def run_side(
         gatmo_poses_xytheta=gatmo_poses,
         gatmo_verified=gatmo_verified,
         align_outcomes=align_outcomes,
+        refusals=refusals,
     )
 
 

@@ -66,3 +66,26 @@ def test_piece_evidence_counts_the_views_gatmo_took_and_confirmed():
     assert by["missed"] == {"pieces": 2, "confirmed_share_median": 0.125,
                             "confirmed_error_median_m": 0.03}
     assert by["found"]["pieces"] == 0 and by["found"]["confirmed_share_median"] is None
+
+
+def test_refusals_are_told_per_object_and_counted_per_piece_by_test():
+    """A run's refusals keyed by (object id, test) give one object's tests; over the pieces
+    seen at both places and not found, each test counts the pieces it refused at least once,
+    and a piece no chair was ever tested against counts as never refused."""
+    from benchmarks.bench_gatmo_sim import refusals_by_outcome, refusals_of
+
+    run = {(3, "larger"): 2, (3, "score"): 5, (4, "beams"): 1}
+    assert refusals_of(run, 3) == {"larger": 2, "score": 5}
+    assert refusals_of(run, 9) == {}
+    both = {"observed": "both"}
+    by = refusals_by_outcome([
+        {**both, "outcome": "absent", "refusals": {"larger": 2, "score": 5}},
+        {**both, "outcome": "absent", "refusals": {"score": 1}},
+        {**both, "outcome": "absent", "refusals": {}},
+        {**both, "outcome": "missed", "refusals": {"beams": 1}},
+        {**both, "outcome": "found", "refusals": {"score": 3}},
+        {"observed": "old", "outcome": "absent", "refusals": {"far": 1}},
+    ])
+    assert by["absent"] == {"pieces": 3, "never_refused": 1,
+                            "refused_by": {"score": 2, "larger": 1}}
+    assert by["missed"] == {"pieces": 1, "never_refused": 0, "refused_by": {"beams": 1}}

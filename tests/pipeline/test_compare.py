@@ -128,3 +128,32 @@ def test_the_simulated_configuration_models_the_simulators_odometry_noise(preset
     amcl, odom = sim_stack_config().amcl, SimConfig.for_preset(preset).odom
     assert [amcl.alpha1, amcl.alpha2, amcl.alpha3, amcl.alpha4] == [
         odom.alpha1, odom.alpha2, odom.alpha3, odom.alpha4]
+
+
+def test_a_run_trace_keeps_the_refusals_of_its_run():
+    """run_side copies what GATMO refused this run (GatmoMapper.refusals, read after the
+    run's end, which may still refuse) into the trace; a side without GATMO has none."""
+    from types import SimpleNamespace
+
+    from gatmo.pipeline.runs import run_side
+
+    class Stack:
+        n_map_updates = 0
+
+        def __init__(self, mapper):
+            self.mapper = mapper
+
+        def begin_run(self, run_id):
+            pass
+
+        def end_run(self):
+            if self.mapper is not None:  # a leaving track's last try
+                self.mapper.refusals[(3, "beams")] = 1
+            return []
+
+    mapper = SimpleNamespace(refusals={(3, "score"): 2})
+    t = run_side(Stack(mapper), [], log="l", side="gatmo", run_id=1)
+    assert t.refusals == {(3, "score"): 2, (3, "beams"): 1}
+    mapper.refusals.clear()
+    assert t.refusals == {(3, "score"): 2, (3, "beams"): 1}  # a copy: the next run resets it
+    assert run_side(Stack(None), [], log="l", side="static", run_id=1).refusals == {}
