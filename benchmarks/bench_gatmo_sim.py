@@ -129,6 +129,8 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
                                              views=views),
                         "scan": rel[-1]["scan_index"] if rel else None,
                         "refusals": refusals_of(trace.refusals, o.id),
+                        "refusals_at_new_place": refusals_near(
+                            trace.refused_at, o.id, cur.get(c["id"])),
                         **piece_evidence(views[0] | views[1], trace, gt)})
         prev = cur
     return out
@@ -157,6 +159,21 @@ def refusals_of(refusals: dict, object_id: int) -> dict:
     return {test: n for (oid, test), n in sorted(refusals.items()) if oid == object_id}
 
 
+def refusals_near(refused_at: dict, object_id: int, piece: dict | None,
+                  margin_m: float = 0.3) -> list[str]:
+    """The tests that refused a chair as object ``object_id`` whose centre lay within the
+    scenario ``piece``'s outline (its half-diagonal plus ``margin_m``) at its new pose:
+    the chair at its new place, not another one tested as it (``RunTrace.refused_at``)."""
+    if piece is None:
+        return []
+    dims = piece["shape"]["dims_m"]
+    half = dims[0] if piece["shape"]["kind"] == "circle" else 0.5 * float(np.hypot(*dims[:2]))
+    xy = np.asarray(piece["pose"][:2], dtype=float)
+    return sorted(test for (oid, test), centres in refused_at.items() if oid == object_id
+                  and any(np.hypot(cx - xy[0], cy - xy[1]) <= half + margin_m
+                          for cx, cy in centres))
+
+
 def refusals_by_outcome(outcomes: list[dict]) -> dict:
     """Over pieces seen at both places and not found (noticed gone, or missed): per outcome,
     how many, how many no chair was ever refused as (``never_refused``: no track was tested
@@ -170,9 +187,17 @@ def refusals_by_outcome(outcomes: list[dict]) -> dict:
         for o in pieces:
             for test in o["refusals"]:
                 tests[test] = tests.get(test, 0) + 1
+        here: dict[str, int] = {}
+        for o in pieces:
+            for test in o.get("refusals_at_new_place", []):
+                here[test] = here.get(test, 0) + 1
         out[kind] = {"pieces": len(pieces),
                      "never_refused": sum(not o["refusals"] for o in pieces),
-                     "refused_by": dict(sorted(tests.items(), key=lambda kv: -kv[1]))}
+                     "refused_by": dict(sorted(tests.items(), key=lambda kv: -kv[1])),
+                     "refused_at_new_place": sum(bool(o.get("refusals_at_new_place"))
+                                                 for o in pieces),
+                     "refused_at_new_place_by": dict(sorted(here.items(),
+                                                            key=lambda kv: -kv[1]))}
     return out
 
 

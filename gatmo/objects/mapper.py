@@ -169,6 +169,9 @@ class GatmoMapper:
         self._gamma_this_run: set[int] = set()  # Gamma objects seen this run
         # per (object id, test): how often a chair was refused as this object this run
         self.refusals: dict[tuple[int, str], int] = {}
+        # and where the refused chairs were: (object id, test) -> their centres (x, y) [m],
+        # rounded to 0.1 m (the benchmark tells the chair at a piece's new place from others)
+        self.refused_at: dict[tuple[int, str], set[tuple[float, float]]] = {}
         # the nudge (beyond the paper): per object id, the cells (ix, iy) returns that missed
         # it landed on -> in how many scans, the scans, their views, and the scans at the
         # last try
@@ -1176,6 +1179,8 @@ class GatmoMapper:
         if isinstance(why, str):
             key = (o.id, why)
             self.refusals[key] = self.refusals.get(key, 0) + 1
+            c = np.round(view[0].mean(axis=0), 1)
+            self.refused_at.setdefault(key, set()).add((float(c[0]), float(c[1])))
             return None
         return why
 

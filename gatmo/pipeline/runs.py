@@ -57,6 +57,8 @@ class RunTrace:
     # (object id, test) -> how often GATMO refused a chair as that object this run, by the
     # matching test that refused it (GatmoMapper.refusals); empty on the static side
     refusals: dict = field(default_factory=dict)
+    # (object id, test) -> the refused chairs' centres (x, y) [m] (GatmoMapper.refused_at)
+    refused_at: dict = field(default_factory=dict)
 
     def mean_ms(self) -> float:
         return float(np.mean(self.ms)) if len(self.ms) else float("nan")
@@ -228,6 +230,8 @@ def run_side(
         ms[-1] += (time.perf_counter() - t0) * 1e3
     mapper = getattr(stack, "mapper", None)
     refusals = dict(mapper.refusals) if mapper is not None else {}
+    refused_at = ({k: set(v) for k, v in getattr(mapper, "refused_at", {}).items()}
+                  if mapper is not None else {})
     if observer is not None:
         observer.on_run_end(side, stack, end_events)
     return RunTrace(
@@ -246,6 +250,7 @@ def run_side(
         gatmo_verified=gatmo_verified,
         align_outcomes=align_outcomes,
         refusals=refusals,
+        refused_at=refused_at,
     )
 
 

@@ -87,5 +87,26 @@ def test_refusals_are_told_per_object_and_counted_per_piece_by_test():
         {"observed": "old", "outcome": "absent", "refusals": {"far": 1}},
     ])
     assert by["absent"] == {"pieces": 3, "never_refused": 1,
-                            "refused_by": {"score": 2, "larger": 1}}
-    assert by["missed"] == {"pieces": 1, "never_refused": 0, "refused_by": {"beams": 1}}
+                            "refused_by": {"score": 2, "larger": 1},
+                            "refused_at_new_place": 0, "refused_at_new_place_by": {}}
+    assert by["missed"]["refused_by"] == {"beams": 1} and by["missed"]["never_refused"] == 0
+
+
+def test_refusals_at_a_pieces_new_place_are_told_from_other_chairs_tested_as_it():
+    """A 0.5 x 0.5 m box now at (4, 2): a chair refused as its object 0.3 m from there counts
+    (within its half-diagonal 0.35 m plus 0.3 m), one 3 m away does not, nor one refused as
+    another object; a round table (radius 0.45 m) reaches 0.75 m."""
+    from benchmarks.bench_gatmo_sim import refusals_by_outcome, refusals_near
+
+    box = {"pose": [4.0, 2.0, 0.3], "shape": {"kind": "box", "dims_m": [0.5, 0.5]}}
+    at = {(3, "score"): {(4.3, 2.0)}, (3, "larger"): {(7.0, 2.0)},
+          (5, "beams"): {(4.0, 2.0)}, (3, "free_space"): {(1.0, 1.0), (4.0, 2.6)}}
+    assert refusals_near(at, 3, box) == ["free_space", "score"]
+    assert refusals_near(at, 3, None) == []
+    table = {"pose": [7.5, 2.0, 0.0], "shape": {"kind": "circle", "dims_m": [0.45]}}
+    assert refusals_near(at, 3, table) == ["larger"]
+    by = refusals_by_outcome([{"observed": "both", "outcome": "absent",
+                               "refusals": {"score": 1, "larger": 1, "free_space": 2},
+                               "refusals_at_new_place": ["free_space", "score"]}])
+    assert by["absent"]["refused_at_new_place"] == 1
+    assert by["absent"]["refused_at_new_place_by"] == {"free_space": 1, "score": 1}

@@ -1100,6 +1100,9 @@ def test_one_scan_from_a_pose_off_does_not_bar_a_match_with_views(free_from, rel
         assert np.hypot(*(box.pose_xytheta[:2] - [6.5, 3.0])) < 0.06
     else:
         assert m.refusals.get((box.id, "free_space"), 0) > 0
+        # where the refused chair was: the box's new place (its south face, seen from y 1.2)
+        centres = m.refused_at[(box.id, "free_space")]
+        assert centres and all(np.hypot(x - 6.5, y - 3.0) < 0.4 for x, y in centres)
 
 
 @pytest.mark.parametrize("provisional", [False, True])

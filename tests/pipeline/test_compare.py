@@ -151,9 +151,10 @@ def test_a_run_trace_keeps_the_refusals_of_its_run():
                 self.mapper.refusals[(3, "beams")] = 1
             return []
 
-    mapper = SimpleNamespace(refusals={(3, "score"): 2})
+    mapper = SimpleNamespace(refusals={(3, "score"): 2}, refused_at={(3, "score"): {(1.0, 2.0)}})
     t = run_side(Stack(mapper), [], log="l", side="gatmo", run_id=1)
     assert t.refusals == {(3, "score"): 2, (3, "beams"): 1}
+    assert t.refused_at == {(3, "score"): {(1.0, 2.0)}}
     mapper.refusals.clear()
     assert t.refusals == {(3, "score"): 2, (3, "beams"): 1}  # a copy: the next run resets it
     assert run_side(Stack(None), [], log="l", side="static", run_id=1).refusals == {}
