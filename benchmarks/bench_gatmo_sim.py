@@ -96,8 +96,9 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     gone, not found; missed), whether the robot could have found it (``observed``: both its
     old place seen through and its new place seen, from the true poses: "both", "old", "new",
     "none"), for relocations the scan index at which it happened, the matching tests that
-    refused a chair as its object that run (``refusals``: test -> count), and the evidence
-    GATMO had of it (:func:`piece_evidence`)."""
+    refused a chair as its object that run (``refusals``: test -> count; of them, those that
+    refused the chair at its new place: ``refusals_at_new_place``, :func:`refusals_near`), and
+    the evidence GATMO had of it (:func:`piece_evidence`)."""
     from gatmo.maps.object_io import load_objects
     from gatmo.pipeline.evaluate import observed, piece_outcome, piece_views, tie_objects
     from gatmo.pipeline.runs import load_scans
@@ -178,7 +179,9 @@ def refusals_by_outcome(outcomes: list[dict]) -> dict:
     """Over pieces seen at both places and not found (noticed gone, or missed): per outcome,
     how many, how many no chair was ever refused as (``never_refused``: no track was tested
     against the object that run), and per matching test how many were refused by it at least
-    once (a piece refused by several tests counts under each)."""
+    once (a piece refused by several tests counts under each); the same for the chair at the
+    piece's new place only (``refused_at_new_place``, ``refused_at_new_place_by``: tests
+    named ``gamma_*`` refused it as a Gamma object, at an absence or at the run's end)."""
     out = {}
     for kind in ("absent", "missed"):
         pieces = [o for o in outcomes if o["observed"] == "both" and o["outcome"] == kind

@@ -367,6 +367,7 @@ class GatmoMapper:
                 continue
             for g in kept:
                 if _larger_than(_diameter(g.shape_xy), o):
+                    self._refused(o, "gamma_larger", g.cells_world())
                     continue  # what was seen is larger than the object
                 fit = self._fit_gamma_ranked(g, o)
                 if fit is not None:
@@ -1177,12 +1178,17 @@ class GatmoMapper:
         test, else None (and the test that refused it counted in :attr:`refusals`)."""
         why = self._refusal(m, o, tier, view)
         if isinstance(why, str):
-            key = (o.id, why)
-            self.refusals[key] = self.refusals.get(key, 0) + 1
-            c = np.round(view[0].mean(axis=0), 1)
-            self.refused_at.setdefault(key, set()).add((float(c[0]), float(c[1])))
+            self._refused(o, why, view[0])
             return None
         return why
+
+    def _refused(self, o: MapObject, test: str, pts: np.ndarray) -> None:
+        """Count a chair (cells ``pts`` (P, 2), map frame) refused as ``o`` by ``test``, and
+        where it was (:attr:`refusals`, :attr:`refused_at`)."""
+        key = (o.id, test)
+        self.refusals[key] = self.refusals.get(key, 0) + 1
+        c = np.round(pts.mean(axis=0), 1)
+        self.refused_at.setdefault(key, set()).add((float(c[0]), float(c[1])))
 
     def _refusal(self, m: Metaobject, o: MapObject, tier: int,
                  view: tuple[np.ndarray, np.ndarray, float]) -> tuple[tuple, object] | str:
@@ -1396,12 +1402,18 @@ class GatmoMapper:
     def _fit_gamma(self, g: MapObject, o: MapObject):
         """The match of ``o`` onto the Gamma object ``g`` (a chair seen, never added), or
         None if it fails the score, free-space or nearness (small objects) tests."""
-        mt = self._match(g.cells_world(), o)
+        pts = g.cells_world()
+        mt = self._match(pts, o)
         if not self._distinctive(o) and self._far(o, mt):
+            self._refused(o, "gamma_far", pts)
             return None
-        if mt.score >= self.cfg.match_min_score and self._free_consistent(o, mt):
-            return mt
-        return None
+        if mt.score < self.cfg.match_min_score:
+            self._refused(o, "gamma_score", pts)
+            return None
+        if not self._free_consistent(o, mt):
+            self._refused(o, "gamma_free_space", pts)
+            return None
+        return mt
 
     def _fit_gamma_ranked(self, g: MapObject, o: MapObject,
                           strict: bool = False) -> tuple[tuple, object] | None:
@@ -1412,13 +1424,17 @@ class GatmoMapper:
         if strict:
             pts = g.cells_world()
             view = (pts, pts, _diameter(pts))
-            if (_larger_than(view[2], o)
-                    or len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy)):
+            if _larger_than(view[2], o):
+                self._refused(o, "gamma_larger", pts)
+                return None
+            if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
+                self._refused(o, "gamma_too_little", pts)
                 return None
         mt = self._fit_gamma(g, o)
         if mt is None:
             return None
         if strict and self._ambiguous(None, o, mt, view):
+            self._refused(o, "gamma_ambiguous", pts)
             return None
         return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
 

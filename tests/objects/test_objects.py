@@ -1409,6 +1409,11 @@ def test_an_absence_takes_a_gamma_corner_only_if_no_other_shape_fits_it(to_gamma
     assert ("relocated" in kinds) == relocated, kinds
     assert (gam in m.object_map.objects) == (not relocated)
     assert (m.counts["ambiguous"] > 0) == strict  # refused as ambiguous, not as too little
+    # what refused it, and where the Gamma corner was, for the benchmark (refusals_near)
+    assert (m.refusals.get((cab.id, "gamma_ambiguous"), 0) > 0) == strict
+    if strict:
+        (cx, cy), = m.refused_at[(cab.id, "gamma_ambiguous")]
+        assert np.hypot(cx - 5.1, cy - 1.1) < 0.15
     if relocated:  # the cabinet's corner on the seen corner
         corner = transform_points(cab.pose_xytheta, cab.shape_xy)
         assert np.min(np.hypot(*(corner - (5.0, 1.0)).T)) < 0.08
