@@ -18,6 +18,7 @@ import argparse
 import json
 import tempfile
 import time
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from functools import partial
 from pathlib import Path
@@ -186,21 +187,14 @@ def refusals_by_outcome(outcomes: list[dict]) -> dict:
     for kind in ("absent", "missed"):
         pieces = [o for o in outcomes if o["observed"] == "both" and o["outcome"] == kind
                   and "refusals" in o]
-        tests: dict[str, int] = {}
-        for o in pieces:
-            for test in o["refusals"]:
-                tests[test] = tests.get(test, 0) + 1
-        here: dict[str, int] = {}
-        for o in pieces:
-            for test in o.get("refusals_at_new_place", []):
-                here[test] = here.get(test, 0) + 1
+        tests = Counter(t for o in pieces for t in o["refusals"])
+        here = Counter(t for o in pieces for t in o.get("refusals_at_new_place", []))
         out[kind] = {"pieces": len(pieces),
                      "never_refused": sum(not o["refusals"] for o in pieces),
-                     "refused_by": dict(sorted(tests.items(), key=lambda kv: -kv[1])),
+                     "refused_by": dict(tests.most_common()),
                      "refused_at_new_place": sum(bool(o.get("refusals_at_new_place"))
                                                  for o in pieces),
-                     "refused_at_new_place_by": dict(sorted(here.items(),
-                                                            key=lambda kv: -kv[1]))}
+                     "refused_at_new_place_by": dict(here.most_common())}
     return out
 
 

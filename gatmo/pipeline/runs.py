@@ -230,8 +230,7 @@ def run_side(
         ms[-1] += (time.perf_counter() - t0) * 1e3
     mapper = getattr(stack, "mapper", None)
     refusals = dict(mapper.refusals) if mapper is not None else {}
-    refused_at = ({k: set(v) for k, v in getattr(mapper, "refused_at", {}).items()}
-                  if mapper is not None else {})
+    refused_at = {k: set(v) for k, v in mapper.refused_at.items()} if mapper is not None else {}
     if observer is not None:
         observer.on_run_end(side, stack, end_events)
     return RunTrace(
