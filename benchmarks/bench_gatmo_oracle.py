@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._overrides import add_override_args
+from benchmarks.bench_gatmo_sim import by_run_and_start
 
 OUT = Path("bench-out")
 
@@ -104,7 +105,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
-    from gatmo.pipeline.evaluate import observed, piece_outcome, tie_objects
+    from gatmo.pipeline.evaluate import object_state, observed, piece_outcome, tie_objects
     from gatmo.pipeline.runs import load_scans
 
     sim = SimConfig.for_preset("hall")
@@ -120,6 +121,9 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
     stack = stack_poses(scen, cfg, tmp / f"s{seed}") if pose_source == "stack" else None
     for k, log in enumerate(scen.logs):
         scans = load_scans(log)
+        start = {pid: object_state(mapper.object_map.by_id[oid], pid, doc["map_objects"],
+                                   list(prev.values()))
+                 for pid, oid in p2o.items()}
         mapper.begin_run(k + 1)
         events = []
         trusted = np.ones(len(scans), dtype=bool)
@@ -153,6 +157,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
             obs = observed(scans, prev[pid], cur.get(pid))
             rows.append({"seed": seed, "run": k + 1, "label": c["label"], "kind": c["kind"],
                          "returned": bool(c.get("returned")), "observed": obs, "outcome": out,
+                         "start": start[pid],
                          "scans_to_match": rel[-1]["support_scans"] if rel else None,
                          "stack_median_error_m": stack_err_m,
                          "refusals": {why: n for (oid, why), n in refusals.items()
@@ -225,6 +230,7 @@ def main(argv=None) -> int:
             for why in r["refusals"]:
                 d[why] = d.get(why, 0) + 1
     total["refused_of_seen_both_by_outcome"] = refused
+    total["seen_both_by_run_and_start"] = by_run_and_start(rows)
     back = [r for r in rows if r["returned"] and r["observed"] == "both"]
     if back:  # pieces put back where they stood before (--return-prob)
         total["returned_seen_both"] = len(back)

@@ -101,16 +101,24 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     refused the chair at its new place: ``refusals_at_new_place``, :func:`refusals_near`), and
     the evidence GATMO had of it (:func:`piece_evidence`)."""
     from gatmo.maps.object_io import load_objects
-    from gatmo.pipeline.evaluate import observed, piece_outcome, piece_views, tie_objects
+    from gatmo.pipeline.evaluate import (
+        object_state,
+        observed,
+        piece_outcome,
+        piece_views,
+        tie_objects,
+    )
     from gatmo.pipeline.runs import load_scans
 
     doc = json.loads(Path(scen.scenario_json).read_text())
     folders = sorted((cmp_dir / "gatmo").glob("*"))
     out = []
     prev = {p["id"]: p for p in doc["map_objects"]}
+    om = None
     for k, run in enumerate(doc["runs"]):
         scans = load_scans(scen.logs[k])
         cur = {p["id"]: p for p in run["objects"]}
+        om_start = om  # the object map this run started from (None: the static map's)
         om = load_objects(folders[k] / "objects.json")
         ties = tie_objects(om, doc)
         p2o = {v: o for o, v in ties.items()}
@@ -130,6 +138,10 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
                         "observed": observed(scans, prev[c["id"]], cur.get(c["id"]),
                                              views=views),
                         "scan": rel[-1]["scan_index"] if rel else None,
+                        # the static map a first run starts from is the layout before it
+                        "start": "right" if om_start is None else object_state(
+                            om_start.by_id[o.id], c["id"], doc["map_objects"],
+                            list(prev.values())),
                         "refusals": refusals_of(trace.refusals, o.id),
                         "refusals_at_new_place": refusals_near(
                             trace.refused_at, o.id, cur.get(c["id"])),
@@ -212,6 +224,26 @@ def evidence_by_outcome(outcomes: list[dict]) -> dict:
                      "confirmed_share_median": float(np.median(share)) if share else None,
                      "confirmed_error_median_m": float(np.median(err)) if err else None}
     return out
+
+
+def by_run_and_start(outcomes: list[dict]) -> dict:
+    """Over pieces seen at both places: per run, [pieces, found] (``found_by_run``); and per
+    state of the piece's object at the run's start (``start``, :func:`~gatmo.pipeline.
+    evaluate.object_state` against the layout before the run), the outcomes
+    (``outcome_by_start``). Whether finds fall off after the first run, and whether because
+    the map a run starts from was already wrong for the piece."""
+    both = [o for o in outcomes if o["observed"] == "both"]
+    found: dict[int, list[int]] = {}
+    for o in both:
+        d = found.setdefault(int(o["run"]), [0, 0])
+        d[0] += 1
+        d[1] += o["outcome"] == "found"
+    start: dict[str, dict[str, int]] = {}
+    for o in both:
+        if "start" in o:
+            d = start.setdefault(o["start"], {})
+            d[o["outcome"]] = d.get(o["outcome"], 0) + 1
+    return {"found_by_run": dict(sorted(found.items())), "outcome_by_start": start}
 
 
 def last_census(scen, cmp_dir: Path) -> dict:
@@ -335,6 +367,8 @@ def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
     total["table_ii"] = table_ii(rows)
     total["evidence_seen_both"] = evidence_by_outcome([o for r in rows for o in r["outcomes"]])
     total["refusals_seen_both"] = refusals_by_outcome([o for r in rows for o in r["outcomes"]])
+    total["seen_both_by_run_and_start"] = by_run_and_start(
+        [o for r in rows for o in r["outcomes"]])
     return total
 
 

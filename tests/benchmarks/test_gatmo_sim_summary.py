@@ -16,8 +16,9 @@ def _row(seed, gatmo_ate_m, static_ate_m, found, moved, stale_ids):
            "false_relocations": 1, "twin_relocations": 0, "false_absences": 0,
            **{f"last_{k}": 2 for k in CENSUS_KEYS}, "last_stale_ids": stale_ids,
            "gatmo_ms_per_scan": 20.0, "static_ms_per_scan": 2.0,
-           "outcomes": [{"label": "box", "outcome": "found", "observed": "both"}] * found
-           + [{"label": "desk", "outcome": "missed", "observed": "old"}] * (moved - found)}
+           "outcomes": [{"run": 1, "label": "box", "outcome": "found", "observed": "both"}] * found
+           + [{"run": 2, "label": "desk", "outcome": "missed", "observed": "old"}]
+           * (moved - found)}
     return row
 
 
@@ -34,6 +35,7 @@ def test_totals_over_seeds_leave_the_per_seed_lists_to_the_rows():
                              "desk": {"found": 0, "twin": 0, "wrong": 0, "absent": 0,
                                       "missed": 16}}
     assert "last_stale_ids" not in t["last_run_census_per_seed"]
+    assert t["seen_both_by_run_and_start"]["found_by_run"] == {1: [4, 4]}
 
 
 def test_piece_evidence_counts_the_views_gatmo_took_and_confirmed():
@@ -110,3 +112,18 @@ def test_refusals_at_a_pieces_new_place_are_told_from_other_chairs_tested_as_it(
                                "refusals_at_new_place": ["free_space", "score"]}])
     assert by["absent"]["refused_at_new_place"] == 1
     assert by["absent"]["refused_at_new_place_by"] == {"free_space": 1, "score": 1}
+
+
+def test_finds_are_told_by_run_and_by_the_state_the_run_started_from():
+    from benchmarks.bench_gatmo_sim import by_run_and_start
+
+    def piece(run, outcome, start, observed="both"):
+        return {"run": run, "outcome": outcome, "start": start, "observed": observed}
+
+    outs = [piece(1, "found", "right"), piece(1, "found", "right"), piece(1, "absent", "right"),
+            piece(2, "found", "right"), piece(2, "twin", "twin"), piece(2, "missed", "absent"),
+            piece(3, "wrong", "right"), piece(3, "found", "elsewhere", observed="old")]
+    t = by_run_and_start(outs)
+    assert t["found_by_run"] == {1: [3, 2], 2: [3, 1], 3: [1, 0]}
+    assert t["outcome_by_start"] == {"right": {"found": 3, "absent": 1, "wrong": 1},
+                                     "twin": {"twin": 1}, "absent": {"missed": 1}}

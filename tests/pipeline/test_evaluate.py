@@ -142,3 +142,17 @@ def test_seen_through_counts_points_a_true_beam_passed():
     assert n == 1
     union, n = seen_through(pts, [scan], max_range_m=9.0)
     assert union.tolist() == [True, True, False, False, True]
+
+
+def test_object_state_tells_where_an_object_stands_against_its_piece():
+    from gatmo.pipeline.evaluate import object_state
+
+    layout0 = [_piece(7, [2.0, 1.0, 0.0]), _piece(8, [6.0, 1.0, 0.0])]
+    layout = [_piece(7, [2.0, 4.0, 0.0]), _piece(8, [5.0, 3.0, 0.0])]
+    assert object_state(_box_object([2.0, 4.05, 0.0]), 7, layout0, layout) == "right"
+    assert object_state(_box_object([5.0, 3.0, 0.0]), 7, layout0, layout) == "twin"
+    assert object_state(_box_object([2.0, 4.3, 0.0]), 7, layout0, layout) == "elsewhere"
+    gone = _box_object([2.0, 4.0, 0.0])
+    gone.status = "A"
+    assert object_state(gone, 7, layout0, layout) == "absent"
+    assert object_state(_box_object([2.0, 4.0, 0.0]), 9, layout0, layout) == "unknown"
