@@ -259,14 +259,9 @@ def piece_outcome(o, piece_id: int, layout0: list[dict], layout: list[dict],
     (placed at the piece's true pose: 0.1 m mean footprint, 0.15 m centre), "twin" (at an
     identical piece's true pose, :func:`twin_of`), "wrong" (relocated elsewhere), "absent"
     (noticed gone only) or "missed". ``events``: the run's events as dicts."""
-    placed = o.status in ("U", "M")
-    exp = expected_pose(o, piece_id, layout0, layout)
-    if placed and exp is not None:
-        md, cd = placement_error(o, exp)
-        if md < 0.1 and cd < 0.15:
-            return "found"
-    if placed and twin_of(o, piece_id, layout0, layout) is not None:
-        return "twin"
+    state = object_state(o, piece_id, layout0, layout)
+    if state in ("right", "twin"):
+        return "found" if state == "right" else "twin"
     kinds = {e["kind"] for e in events if e.get("object_id") == o.id}
     return "wrong" if "relocated" in kinds else "absent" if "absent" in kinds else "missed"
 
@@ -280,12 +275,13 @@ def object_state(o, piece_id: int, layout0: list[dict], layout: list[dict]) -> s
     if o.status not in ("U", "M"):
         return "absent"
     exp = expected_pose(o, piece_id, layout0, layout)
-    if exp is None:
-        return "unknown"
-    md, cd = placement_error(o, exp)
-    if md < 0.1 and cd < 0.15:
-        return "right"
-    return "twin" if twin_of(o, piece_id, layout0, layout) is not None else "elsewhere"
+    if exp is not None:
+        md, cd = placement_error(o, exp)
+        if md < 0.1 and cd < 0.15:
+            return "right"
+    if twin_of(o, piece_id, layout0, layout) is not None:
+        return "twin"
+    return "unknown" if exp is None else "elsewhere"
 
 
 def piece_views(scans, piece_old: dict, piece_new: dict | None,
