@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._overrides import add_override_args
-from benchmarks.bench_gatmo_sim import by_run_and_start
+from benchmarks.bench_gatmo_sim import by_run_and_start, refusals_of
 
 OUT = Path("bench-out")
 
@@ -160,8 +160,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
                          "start": start[pid],
                          "scans_to_match": rel[-1]["support_scans"] if rel else None,
                          "stack_median_error_m": stack_err_m,
-                         "refusals": {why: n for (oid, why), n in refusals.items()
-                                      if oid == o.id}})
+                         "refusals": refusals_of(refusals, o.id)})
         prev = cur
     return rows
 

@@ -232,18 +232,18 @@ def by_run_and_start(outcomes: list[dict]) -> dict:
     evaluate.object_state` against the layout before the run), the outcomes
     (``outcome_by_start``). Whether finds fall off after the first run, and whether because
     the map a run starts from was already wrong for the piece."""
-    both = [o for o in outcomes if o["observed"] == "both"]
     found: dict[int, list[int]] = {}
-    for o in both:
+    start: dict[str, Counter] = {}
+    for o in outcomes:
+        if o["observed"] != "both":
+            continue
         d = found.setdefault(int(o["run"]), [0, 0])
         d[0] += 1
         d[1] += o["outcome"] == "found"
-    start: dict[str, dict[str, int]] = {}
-    for o in both:
         if "start" in o:
-            d = start.setdefault(o["start"], {})
-            d[o["outcome"]] = d.get(o["outcome"], 0) + 1
-    return {"found_by_run": dict(sorted(found.items())), "outcome_by_start": start}
+            start.setdefault(o["start"], Counter())[o["outcome"]] += 1
+    return {"found_by_run": dict(sorted(found.items())),
+            "outcome_by_start": {k: dict(v) for k, v in start.items()}}
 
 
 def last_census(scen, cmp_dir: Path) -> dict:

@@ -229,8 +229,8 @@ def run_side(
     if n:
         ms[-1] += (time.perf_counter() - t0) * 1e3
     mapper = getattr(stack, "mapper", None)
-    refusals = dict(mapper.refusals) if mapper is not None else {}
-    refused_at = {k: set(v) for k, v in mapper.refused_at.items()} if mapper is not None else {}
+    refusals, refused_at = ({}, {}) if mapper is None else (
+        dict(mapper.refusals), {k: set(v) for k, v in mapper.refused_at.items()})
     if observer is not None:
         observer.on_run_end(side, stack, end_events)
     return RunTrace(
