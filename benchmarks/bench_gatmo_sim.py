@@ -79,6 +79,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
                             for x in g if x.get("obj_gone", 0)),
         "false_relocations": sum(x.get("obj_false_relocations", 0) for x in g),
         "twin_relocations": sum(x.get("obj_twin_relocations", 0) for x in g),
+        "false_relocations_carried": sum(x.get("obj_false_relocations_carried", 0) for x in g),
         "false_absences": sum(x.get("obj_false_absences", 0) for x in g),
         "map_correct_last": g[-1].get("obj_map_correct_fraction", float("nan")),
         **{f"last_{k}": v for k, v in census.items()},
@@ -346,6 +347,8 @@ def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
         "absent_recall": float(a["gone_noticed"].sum() / max(a["gone"].sum(), 1)),
         "false_relocations_per_run": float(a["false_relocations"].sum() / (len(rows) * runs)),
         "twin_relocations_per_run": float(a["twin_relocations"].sum() / (len(rows) * runs)),
+        "false_relocations_carried_per_run": float(
+            a["false_relocations_carried"].sum() / (len(rows) * runs)),
         "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * runs)),
         # after the last run, per seed: objects on pieces, second objects on a piece, objects
         # where no piece stands, pieces no object stands on (map_census)

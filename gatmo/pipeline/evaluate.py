@@ -81,7 +81,10 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     object was taken off its old place (absent or relocated); false_relocations: relocation
     events this run that left an object in the wrong place, and twin_relocations those that
     put it at the true pose of an identical piece instead (the map right, the identity
-    swapped; counted among false_relocations until 2026-11-24).
+    swapped; counted among false_relocations until 2026-11-24); false_relocations_carried:
+    of the false ones, those of an object that stood for no piece of its own shape (its own
+    or an identical one, in this layout or the run before's) before the event: an earlier
+    error carried on (an object put on another piece following that piece), not a new one.
     """
     r = scenario["runs"][run - 1]
     layout0 = scenario["map_objects"]
@@ -107,7 +110,8 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     off = sum(1 for pid in gone if by_id[piece_to_obj[pid]].status == "A"
               or any(e.get("object_id") == piece_to_obj[pid] and e.get("kind") == "relocated"
                      for e in events))
-    false_reloc = twin_reloc = 0
+    false_reloc = twin_reloc = carried = 0
+    layout_before = scenario["runs"][run - 2]["objects"] if run > 1 else layout0
     for e in events:
         if e.get("kind") != "relocated" or e.get("object_id") not in ties:
             continue
@@ -118,8 +122,12 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
             continue
         if twin_of(o, ties[o.id], layout0, layout, pose_then) is not None:
             twin_reloc += 1  # the map is right, an identical piece's identity swapped
-        else:
-            false_reloc += 1
+            continue
+        false_reloc += 1
+        if e.get("pose_old") is not None and not any(
+                _stood_for(o, ties[o.id], layout0, lay, np.asarray(e["pose_old"], dtype=float))
+                for lay in (layout_before, layout)):
+            carried += 1  # it stood for no piece of its own shape before: an earlier error
     false_abs = 0
     for e in events:
         if e.get("kind") != "absent" or e.get("object_id") not in ties:
@@ -145,6 +153,7 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
         "placement_error_m": float(np.mean(errors)) if errors else float("nan"),
         "gone": len(gone), "absent_recall": off / len(gone) if gone else float("nan"),
         "false_relocations": false_reloc, "twin_relocations": twin_reloc,
+        "false_relocations_carried": carried,
         "false_absences": false_abs,
         "map_correct_fraction": correct / total if total else float("nan"),
     }
@@ -251,6 +260,16 @@ def twin_of(o, piece_id: int, layout0: list[dict], layout: list[dict],
         if md < 0.1 and cd < 0.15:
             return int(p["id"])
     return None
+
+
+def _stood_for(o, piece_id: int, layout0: list[dict], layout: list[dict],
+               pose_xytheta: np.ndarray) -> bool:
+    """The object at ``pose_xytheta`` lay on its piece's footprint in ``layout``, or on an
+    identical piece's (:func:`twin_of`)."""
+    exp = expected_pose(o, piece_id, layout0, layout)
+    if exp is not None and placement_error(o, exp, pose_xytheta)[0] < 0.1:
+        return True
+    return twin_of(o, piece_id, layout0, layout, pose_xytheta) is not None
 
 
 def piece_outcome(o, piece_id: int, layout0: list[dict], layout: list[dict],

@@ -80,6 +80,35 @@ def test_score_run_tells_twin_swaps_from_false_relocations():
     assert r["found"] == 1  # it ends the run at its own piece's true pose
 
 
+def test_score_run_tells_a_false_relocation_that_carries_an_earlier_error():
+    """Run 2: the box (piece 7) moved from (2, 4) to (3, 5); its object was put on the
+    footstool (piece 9) in an earlier run. Moving the object along with the footstool to
+    (9, 6) is another false relocation, carried; moving it onto the footstool from its own
+    piece's place, in this layout or the run before's, is a new one."""
+    from gatmo.objects.objectmap import ObjectMap
+    from gatmo.pipeline.evaluate import score_run
+
+    o = _box_object([9.0, 6.0, 0.0])
+    om = ObjectMap([o], 0.05)
+    layout0 = [_piece(7, [2.0, 1.0, 0.0]), _piece(9, [9.0, 1.0, 0.0], label="footstool")]
+    layout1 = [_piece(7, [2.0, 4.0, 0.0]), _piece(9, [9.0, 4.0, 0.0], label="footstool")]
+    layout2 = [_piece(7, [3.0, 5.0, 0.0]), _piece(9, [9.0, 6.0, 0.0], label="footstool")]
+    scen = {"map_objects": layout0,
+            "runs": [{"objects": layout1, "changes": []},
+                     {"objects": layout2, "changes": [{"id": 7, "kind": "moved"},
+                                                      {"id": 9, "kind": "moved"}]}]}
+
+    def reloc(old_xy, new_xy):
+        return {"kind": "relocated", "object_id": 1, "pose_old": [*old_xy, 0.0],
+                "pose_new": [*new_xy, 0.0]}
+
+    carried = score_run(om, {1: 7}, scen, 2, [reloc((9.0, 4.0), (9.0, 6.0))])
+    assert (carried["false_relocations"], carried["false_relocations_carried"]) == (1, 1)
+    for old_xy in ((3.0, 5.0), (2.0, 4.0)):
+        fresh = score_run(om, {1: 7}, scen, 2, [reloc(old_xy, (9.0, 6.0))])
+        assert (fresh["false_relocations"], fresh["false_relocations_carried"]) == (1, 0)
+
+
 def test_observed_tells_whether_the_old_place_was_seen_through_and_the_new_one_seen():
     # the box stood at (3, 4) and now stands at (5.5, 4); the robot at (1, 4) looks along +x
     old, new = _piece(1, (3.0, 4.0, 0.0)), _piece(1, (5.5, 4.0, 0.0))

@@ -528,6 +528,58 @@ def test_gatmo_pose_gain_averages_the_alignment_jitter_out(gain):
     np.testing.assert_allclose(stack._smoothed(far, compose(T_local_map, true[-1])), far)
 
 
+class JitteryLocalizer(ScriptedLocalizer):
+    """The true pose plus white jitter on every scan, strictly confident on every third (a
+    filter updates only every update_min_d of travel)."""
+
+    def __init__(self, truth, jitter):
+        super().__init__(truth, confident_at=range(0, len(truth), 3))
+        self.jitter = jitter
+
+    def update(self, odom, scan, withheld=None):
+        est = super().update(odom, scan, withheld)
+        return Est(est.pose_xytheta + self.jitter[self.i - 1], est.cov)
+
+
+@pytest.mark.parametrize("carry_m", [0.0, 1.0])
+def test_gatmo_pose_gain_carries_across_scans_gatmo_is_not_handed_with_gatmo_pose_carry_m(
+        carry_m):
+    n = 300
+    truth = np.stack([0.02 * np.arange(n), 3.0 + 0.3 * np.sin(0.01 * np.arange(n)),
+                      0.003 * np.arange(n)], 1)
+    jitter = np.random.default_rng(5).normal(0.0, 1.0, (n, 3)) * [0.02, 0.02, np.radians(1.0)]
+
+    class Recorder(RecordingMapper):
+        def __init__(self):
+            super().__init__()
+            self.poses = []
+
+        def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True,
+                   track=True):
+            if pose_confident:
+                self.poses.append((int(round(stamp_s)), np.asarray(pose, dtype=float)))
+            return super().update(pose, scan, pose_confident=pose_confident, stamp_s=stamp_s,
+                                  pose_verified=pose_verified, track=track)
+
+    rec = Recorder()
+    fusion = FusionConfig(align_to_map=False, gatmo_pose_gain=0.25, gatmo_pose_carry_m=carry_m,
+                          max_travel_without_reset_m=100.0)
+    stack = LocalizationStack(JitteryLocalizer(truth, jitter),
+                              DriftingMatcher(truth, (10.0, -4.0, 1.0)), rec, fusion)
+    stack.begin_run(1)
+    for s in _scans(n):
+        stack.step(s)
+    idx = np.array([i for i, _ in rec.poses])
+    assert np.array_equal(idx, np.arange(0, n, 3))  # GATMO is handed every third scan
+    err = np.array([p for _, p in rec.poses]) - truth[idx]
+    err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    if carry_m == 0.0:  # restarted on every scan handed: the jitter as it was
+        np.testing.assert_allclose(err, jitter[idx], atol=1e-9)
+    else:  # a first-order filter across the gaps (std x 0.38 for white jitter)
+        ratio = np.std(err[10:], axis=0) / np.std(jitter[idx][10:], axis=0)
+        assert np.all(ratio < 0.5)
+
+
 @pytest.mark.parametrize("min_tight, verified", [(0.0, True), (0.9, False)])
 def test_an_alignment_loose_everywhere_is_inconclusive_with_align_min_tight_fraction(
         min_tight, verified):
