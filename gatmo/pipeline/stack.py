@@ -87,14 +87,15 @@ class FusionConfig(GatmoModel):
     the alignment's scan-to-scan jitter (1-2 cm, about 1 deg), which smears the chair
     hypothesis. Beyond the paper. Measured at 0.3 on hall seeds 300-309 it changes little
     (moved pieces found 12.0 % -> 13.2 %, false relocations 0.70 -> 0.80 per run, time lost
-    5.7 % -> 5.5 %), so it is off. The filter updates (and is strictly confident) only every
-    ``update_min_d`` of travel, about every third scan in the simulated halls, and the filter
-    restarts after every scan GATMO is not handed; ``gatmo_pose_carry_m`` (0 = restart) carries
-    it across such scans for up to that much travel, unless the filter jumped. Halls 400-419 at
-    gain 0.2 and 1 m: the poses GATMO is handed in runs 2-4 of seed 400 are half as far off
-    (median 2-3 cm instead of 5), moved pieces found 16.1 % -> 18.4 %, but false relocations
-    1.10 -> 2.25 per seed (gain 0.5 on 400-409: found 30 -> 34, false relocations 9 -> 14):
-    off (docs/experiments.md, thirty-first session).
+    5.7 % -> 5.5 %), so it is off. The localizer updates (and is strictly confident) only
+    every ``update_min_d`` of travel, about every third scan in the simulated halls, and this
+    complementary filter restarts after every scan GATMO is not handed: at the gain measured
+    it smoothed nothing. ``gatmo_pose_carry_m`` (0 = restart) carries it across such scans for
+    up to that much travel, unless the localizer jumped. Halls 400-419 at gain 0.2 and 1 m: on
+    seed 400 the poses GATMO is handed in runs 3-4 are off by 2.4-3.1 cm (median) instead of
+    4.9-5.1 cm; moved pieces found 16.1 % -> 18.4 %, but false relocations 1.10 -> 2.25 per
+    seed, the new ones among them doubled too (gain 0.5 on 400-409: found 30 -> 34, false
+    relocations 9 -> 14): off (docs/experiments.md, thirty-first session).
 
     ``mask_unexplained``: returns that land, seen from the pose odometry predicts, where GATMO
     found this run's returns unexplained by the current map (furniture it has not placed yet,
