@@ -116,16 +116,14 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
         if e.get("kind") != "relocated" or e.get("object_id") not in ties:
             continue
         o = by_id[e["object_id"]]
-        exp = expected_pose(o, ties[o.id], layout0, layout)
-        pose_then = np.asarray(e["pose_new"], dtype=float)
-        if exp is not None and placement_error(o, exp, pose_then)[0] < 0.1:
-            continue
-        if twin_of(o, ties[o.id], layout0, layout, pose_then) is not None:
+        placed = _placed_as(o, ties[o.id], layout0, layout, np.asarray(e["pose_new"], float))
+        if placed == "twin":
             twin_reloc += 1  # the map is right, an identical piece's identity swapped
+        if placed is not None:
             continue
         false_reloc += 1
         if e.get("pose_old") is not None and not any(
-                _stood_for(o, ties[o.id], layout0, lay, np.asarray(e["pose_old"], dtype=float))
+                _placed_as(o, ties[o.id], layout0, lay, np.asarray(e["pose_old"], float))
                 for lay in (layout_before, layout)):
             carried += 1  # it stood for no piece of its own shape before: an earlier error
     false_abs = 0
@@ -262,14 +260,15 @@ def twin_of(o, piece_id: int, layout0: list[dict], layout: list[dict],
     return None
 
 
-def _stood_for(o, piece_id: int, layout0: list[dict], layout: list[dict],
-               pose_xytheta: np.ndarray) -> bool:
-    """The object at ``pose_xytheta`` lay on its piece's footprint in ``layout``, or on an
-    identical piece's (:func:`twin_of`)."""
+def _placed_as(o, piece_id: int, layout0: list[dict], layout: list[dict],
+               pose_xytheta: np.ndarray) -> str | None:
+    """Whose footprint in ``layout`` the object at ``pose_xytheta`` lies on (0.1 m mean
+    distance): "right" (its piece's), "twin" (an identical piece's, :func:`twin_of`) or
+    None."""
     exp = expected_pose(o, piece_id, layout0, layout)
     if exp is not None and placement_error(o, exp, pose_xytheta)[0] < 0.1:
-        return True
-    return twin_of(o, piece_id, layout0, layout, pose_xytheta) is not None
+        return "right"
+    return "twin" if twin_of(o, piece_id, layout0, layout, pose_xytheta) is not None else None
 
 
 def piece_outcome(o, piece_id: int, layout0: list[dict], layout: list[dict],
