@@ -272,6 +272,10 @@ class GatmoConfig(GatmoModel):
         "it that path skips them, and a chair refused by them while its track lasted could "
         "take the object afterwards. Tuning seeds 300-319: false relocations 1.15 -> 1.00 "
         "per seed [-0.40, +0.10], found 18.1 % -> 17.8 %, ATE 0.150 -> 0.158 m")
+    match_gamma_beam_check: bool = Field(
+        False, description="beyond the paper: an object matched to a Gamma object seen this "
+        "run (match_absence_to_gamma, match_gamma_to_absent) must pass the beam test of a "
+        "track's match (match_beam_check) against the scans that saw the Gamma object")
     add_max_passed_fraction: float = Field(
         0.5, ge=0, le=1, description="of a new object's cells, the fraction rays may have "
         "passed (match_free_rays of them, going on add_gone_beyond_m or more) since a return "

@@ -167,6 +167,9 @@ class GatmoMapper:
         self._front_through: dict[int, set] = {}
         self._doubt: set[int] = set()
         self._gamma_this_run: set[int] = set()  # Gamma objects seen this run
+        # the scans that saw them this run (their tracks' views), for the beam test of a
+        # later match (match_gamma_beam_check)
+        self._gamma_views: dict[int, list] = {}
         # per (object id, test): how often a chair was refused as this object this run
         self.refusals: dict[tuple[int, str], int] = {}
         # and where the refused chairs were: (object id, test) -> their centres (x, y) [m],
@@ -1211,7 +1214,7 @@ class GatmoMapper:
             return "all_returns"
         if self._part_of_larger(o, mt):
             return "part_of_larger"
-        if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m):
+        if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m.views):
             return "beams"
         # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
         if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
@@ -1250,7 +1253,7 @@ class GatmoMapper:
             return False
         if (self.cfg.match_ambiguity_wait and not settle
                 and m.n_obs < self.cfg.match_ambiguity_patience_scans
-                and self._ambiguous(m, o, mt, view)):
+                and self._ambiguous(m.views, o, mt, view)):
             m.waited = True
             return False
         floor = self.cfg.match_ambiguous_min_score
@@ -1281,18 +1284,18 @@ class GatmoMapper:
         """``o`` was seen standing at its place this run (and is not in doubt)."""
         return self._hits.get(o.id, 0) >= self.cfg.confirm_min_beams and o.id not in self._doubt
 
-    def _ambiguous(self, m: Metaobject | None, o: MapObject, mt,
+    def _ambiguous(self, views: list | None, o: MapObject, mt,
                    view: tuple[np.ndarray, np.ndarray, float]) -> bool:
-        """Beyond the paper: the chair of track ``m``, matched to ``o`` at ``mt``, fits an
+        """Beyond the paper: the chair seen by the scans ``views`` (a track's
+        :attr:`Metaobject.views`), matched to ``o`` at ``mt``, fits an
         object that does not look like ``o`` and could be it (furniture not seen at its place
         this run, candidate or not) nearly as well: within ``match_ambiguity_margin``, not
         larger than it, free space and beams consistent there. What is seen of it does not
         yet tell the two apart (a corner of a lounge chair is a corner of a cabinet). With
         ``match_ambiguity_rivals: movable`` only objects known to move count as rivals.
-        ``m`` None: ``view`` holds a Gamma object's cells, free space is judged on the run's
-        rays and beams are not checked (no views)."""
+        ``views`` None (a Gamma object's cells in ``view``, its scans not kept or not to be
+        used): free space is judged on the run's rays and beams are not checked."""
         pts, _, diam_p = view
-        views = None if m is None else m.views
         shapes: list[MapObject] = [o]
         for r in self.object_map.objects:
             movable = r.status in ("M", "A") or r.id in self._doubt
@@ -1311,8 +1314,8 @@ class GatmoMapper:
                 continue
             if not self._free_ok(r, mr, views):
                 continue
-            if (m is not None and self.cfg.match_beam_check
-                    and not self._beams_consistent(r, mr, m)):
+            if (views is not None and self.cfg.match_beam_check
+                    and not self._beams_consistent(r, mr, views)):
                 continue
             self.counts["ambiguous"] += 1
             return True
@@ -1355,12 +1358,13 @@ class GatmoMapper:
             return True
         return bool(outside > max(3, 0.25 * inside))
 
-    def _beams_consistent(self, o: MapObject, mt, m: Metaobject) -> bool:
-        """Beyond the paper: of the beams of the scans that saw the chair which the object at
-        the match would have stopped, at most ``match_max_through_fraction`` went on well past
-        it (:func:`beam_consistency`): a match that only fits the part of the chair one side
-        showed is refused by the beams the other side let through."""
-        sup, con = beam_consistency(o, mt.pose_xytheta, m.views, self.cfg.hit_tolerance_m,
+    def _beams_consistent(self, o: MapObject, mt, views: list) -> bool:
+        """Beyond the paper: of the beams of the scans that saw the chair (``views``, as
+        :attr:`Metaobject.views`) which the object at the match would have stopped, at most
+        ``match_max_through_fraction`` went on well past it (:func:`beam_consistency`): a
+        match that only fits the part of the chair one side showed is refused by the beams
+        the other side let through."""
+        sup, con = beam_consistency(o, mt.pose_xytheta, views, self.cfg.hit_tolerance_m,
                                     self.cfg.match_through_m)
         return con <= self.cfg.match_max_through_fraction * (sup + con)
 
@@ -1413,6 +1417,10 @@ class GatmoMapper:
         if not self._free_consistent(o, mt):
             self._refused(o, "gamma_free_space", pts)
             return None
+        views = self._gamma_views.get(g.id)
+        if self.cfg.match_gamma_beam_check and views and not self._beams_consistent(o, mt, views):
+            self._refused(o, "gamma_beams", pts)
+            return None
         return mt
 
     def _fit_gamma_ranked(self, g: MapObject, o: MapObject,
@@ -1433,7 +1441,8 @@ class GatmoMapper:
         mt = self._fit_gamma(g, o)
         if mt is None:
             return None
-        if strict and self._ambiguous(None, o, mt, view):
+        views = self._gamma_views.get(g.id) if self.cfg.match_gamma_beam_check else None
+        if strict and self._ambiguous(views or None, o, mt, view):
             self._refused(o, "gamma_ambiguous", pts)
             return None
         return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
@@ -1532,10 +1541,11 @@ class GatmoMapper:
         gap = self.cfg.gamma_split_gap_m
         for part in ([pts] if gap is None else _split_cells(pts, self._grid.resolution_m, gap)):
             if len(part) >= self.cfg.chair_min_cells:
-                self._gamma_part(part, stamp_s, events)
+                self._gamma_part(part, stamp_s, events, m.views)
 
-    def _gamma_part(self, pts: np.ndarray, stamp_s, events) -> None:
-        """Cells ``pts`` (P, 2) of a chair become a Gamma object, or join the one they overlap."""
+    def _gamma_part(self, pts: np.ndarray, stamp_s, events, views: list) -> None:
+        """Cells ``pts`` (P, 2) of a chair become a Gamma object, or join the one they overlap;
+        ``views``: the scans of its track that saw it (:attr:`Metaobject.views`)."""
         # a part of an object the map already has where it stands (seen before it was placed
         # there) is no new object
         near, _ = self._explained(pts)
@@ -1550,6 +1560,7 @@ class GatmoMapper:
             same.shape_xy, same.edge_xy, same.pose_xytheta = shape, edge, pose
             same.seen_count += 1
             self._gamma_this_run.add(same.id)
+            self._gamma_views.setdefault(same.id, []).extend(views)
             self._fields.pop(same.id, None)
             self._inner.pop(same.id, None)
             self._cores.pop(same.id, None)
@@ -1561,6 +1572,7 @@ class GatmoMapper:
         o.record(self.run, stamp_s)
         self.object_map.objects.append(o)
         self._gamma_this_run.add(o.id)
+        self._gamma_views[o.id] = list(views)
         events.append(Event(float(stamp_s), self.run, "gamma", o.id, None, None,
                             pose.tolist()))
         self.counts["gamma"] += 1

@@ -1450,3 +1450,40 @@ def test_match_ambiguous_min_score_leaves_an_unambiguous_match_alone():
     rel = [e for e in events if e.kind == "relocated" and e.object_id == box.id]
     assert rel and rel[0].score < 0.99
     assert m.counts["ambiguous"] == m.counts["ambiguous_refused"] == 0
+
+
+@pytest.mark.parametrize(("beam_check", "relocated"), [(True, False), (False, True)])
+def test_an_absent_desk_is_not_put_onto_a_gamma_box_where_beams_went_on(beam_check, relocated):
+    # the desk and the new box of the test above, seen in the other order: the box first, from
+    # poses only the filter vouched for (its track ends unmatched, into Gamma), then the desk's
+    # place empty from confirmed poses. The paper's order-free matching then tries the absent
+    # desk on the Gamma box; with match_gamma_beam_check the beams of the scans that saw the
+    # box, which went on past where the rest of the desk would stand, refuse it
+    cfg = CFG.model_copy(update={"match_gamma_beam_check": beam_check,
+                                 "gamma_min_verified_scans": 0})
+    g = room_grid(10, 6, 0.05, boxes=[(2.0, 4.3, 3.4, 4.8)])
+    world = room_grid(10, 6, 0.05, boxes=[(6.0, 2.3, 6.7, 2.8)])
+    om = ObjectMap.from_grid(g, cfg)
+    desk = [o for o in om.objects if not o.structure][0]
+    m = GatmoMapper(om, g, cfg)
+    m.begin_run(1)
+    events = []
+    path = [((4.0 + 0.02 * k, 1.2 + 0.01 * k, 0.5), False, 0.1 * k) for k in range(60)]
+    path += [((x, 3.6, 1.9), True, 12.0 + 0.1 * k)  # facing away from the box
+             for k, x in enumerate(np.linspace(1.0, 3.0, 30))]
+    for pose, verified, t in path:
+        s = make_scan(world, pose, n_beams=361, max_range_m=4.0, stamp_s=t)
+        if t == 12.0:  # the box's track ends first (tau_memory_s)
+            events += m.update(np.array(pose), s, pose_confident=False, stamp_s=11.0)
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=t,
+                           pose_verified=verified)
+    kinds = [(e.kind, e.object_id) for e in events]
+    gam = [oid for k, oid in kinds if k == "gamma"]
+    assert len(gam) == 1 and kinds.index(("gamma", gam[0])) < kinds.index(("absent", desk.id))
+    assert (("relocated", desk.id) in kinds) == relocated, kinds
+    assert (m.refusals.get((desk.id, "gamma_beams"), 0) > 0) == beam_check, m.refusals
+    if relocated:  # the desk took the Gamma box's place
+        assert np.hypot(*(desk.pose_xytheta[:2] - (6.35, 2.55))) < 0.6
+    else:  # the box stays in Gamma and joins the map at the run's end
+        assert desk.status == "A"
+        assert [e.kind for e in m.end_run() if e.object_id == gam[0]] == ["added"]
