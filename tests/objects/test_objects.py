@@ -842,19 +842,20 @@ def test_beam_consistency_refuses_a_larger_object_where_beams_went_on():
     assert sup == 0 and con == 0
 
 
+def _desk_gone_box_new(**cfg_update):
+    """(mapper in run 1, its desk, the world): a 10 x 6 m room whose map has a 1.4 x 0.5 m
+    desk at (2.7, 4.55); in the world the desk is gone and a new 0.7 x 0.5 m box stands at
+    (6.35, 2.55)."""
+    return _one_object((10, 6), (2.0, 4.3, 3.4, 4.8), [(6.0, 2.3, 6.7, 2.8)], **cfg_update)
+
+
 @pytest.mark.parametrize(("beam_check", "relocated"), [(True, False), (False, True)])
 def test_an_absent_desk_is_not_put_onto_a_new_box_that_fits_one_end(beam_check, relocated):
     # map: a desk at (2.7, 4.55); world: the desk gone, a new box of the desk's width at
     # (6.25, 2.55). The robot first sees the desk's place empty (confirmed poses), then the box
     # from poses only the filter vouched for: their rays mark nothing free, but their beams
     # went on past where the rest of the desk would stand
-    cfg = CFG.model_copy(update={"match_beam_check": beam_check})
-    g = room_grid(10, 6, 0.05, boxes=[(2.0, 4.3, 3.4, 4.8)])
-    world = room_grid(10, 6, 0.05, boxes=[(6.0, 2.3, 6.7, 2.8)])
-    om = ObjectMap.from_grid(g, cfg)
-    desk = [o for o in om.objects if not o.structure][0]
-    m = GatmoMapper(om, g, cfg)
-    m.begin_run(1)
+    m, desk, world = _desk_gone_box_new(match_beam_check=beam_check)
     events = []
     path = [((x, 3.6, 0.8), True) for x in np.linspace(1.0, 3.0, 30)]
     path += [((4.0 + 0.02 * k, 1.2 + 0.01 * k, 0.5), False) for k in range(60)]
@@ -1459,14 +1460,8 @@ def test_an_absent_desk_is_not_put_onto_a_gamma_box_where_beams_went_on(beam_che
     # place empty from confirmed poses. The paper's order-free matching then tries the absent
     # desk on the Gamma box; with match_gamma_beam_check the beams of the scans that saw the
     # box, which went on past where the rest of the desk would stand, refuse it
-    cfg = CFG.model_copy(update={"match_gamma_beam_check": beam_check,
-                                 "gamma_min_verified_scans": 0})
-    g = room_grid(10, 6, 0.05, boxes=[(2.0, 4.3, 3.4, 4.8)])
-    world = room_grid(10, 6, 0.05, boxes=[(6.0, 2.3, 6.7, 2.8)])
-    om = ObjectMap.from_grid(g, cfg)
-    desk = [o for o in om.objects if not o.structure][0]
-    m = GatmoMapper(om, g, cfg)
-    m.begin_run(1)
+    m, desk, world = _desk_gone_box_new(match_gamma_beam_check=beam_check,
+                                        gamma_min_verified_scans=0)
     events = []
     path = [((4.0 + 0.02 * k, 1.2 + 0.01 * k, 0.5), False, 0.1 * k) for k in range(60)]
     path += [((x, 3.6, 1.9), True, 12.0 + 0.1 * k)  # facing away from the box
