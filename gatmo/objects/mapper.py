@@ -1293,8 +1293,8 @@ class GatmoMapper:
         larger than it, free space and beams consistent there. What is seen of it does not
         yet tell the two apart (a corner of a lounge chair is a corner of a cabinet). With
         ``match_ambiguity_rivals: movable`` only objects known to move count as rivals.
-        ``views`` None (a Gamma object's cells in ``view``, its scans not kept or not to be
-        used): free space is judged on the run's rays and beams are not checked."""
+        ``views`` None (a Gamma object's cells in ``view``): free space is judged on the
+        run's rays and beams are not checked."""
         pts, _, diam_p = view
         shapes: list[MapObject] = [o]
         for r in self.object_map.objects:
@@ -1441,8 +1441,7 @@ class GatmoMapper:
         mt = self._fit_gamma(g, o)
         if mt is None:
             return None
-        views = self._gamma_views.get(g.id) if self.cfg.match_gamma_beam_check else None
-        if strict and self._ambiguous(views or None, o, mt, view):
+        if strict and self._ambiguous(None, o, mt, view):
             self._refused(o, "gamma_ambiguous", pts)
             return None
         return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
