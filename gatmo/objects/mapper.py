@@ -1417,8 +1417,8 @@ class GatmoMapper:
         if not self._free_consistent(o, mt):
             self._refused(o, "gamma_free_space", pts)
             return None
-        views = self._gamma_views.get(g.id)
-        if self.cfg.match_gamma_beam_check and views and not self._beams_consistent(o, mt, views):
+        views = self._gamma_views.get(g.id) if self.cfg.match_gamma_beam_check else None
+        if views and not self._beams_consistent(o, mt, views):
             self._refused(o, "gamma_beams", pts)
             return None
         return mt

@@ -832,14 +832,14 @@ class LocalizationStack:
         the alignment may correct."""
         g = self.fusion.gatmo_pose_gain
         out = np.array(map_pose, dtype=float)
+        pred = None
         if g < 1.0 and self._gatmo_last is not None:
             last_pose, last_ref = self._gatmo_last
             inc = relative(last_ref, base_ref)
             carry = self.fusion.gatmo_pose_carry_m
             # carried too far on the local increment alone (its drift grows): restart
-            pred = None if 0.0 < carry < np.hypot(inc[0], inc[1]) else compose(last_pose, inc)
-        else:
-            pred = None
+            if not 0.0 < carry < np.hypot(inc[0], inc[1]):
+                pred = compose(last_pose, inc)
         if pred is not None:
             d = relative(pred, map_pose)
             d[2] = float(wrap_angle(d[2]))
