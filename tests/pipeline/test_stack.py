@@ -1010,3 +1010,69 @@ def test_a_filter_that_is_not_confident_is_left_to_find_its_way():
     own resampling can still reach the right place, so the stack does not restart it."""
     loc, stack, _, err, _ = _run_stuck((0.9, -0.6, 0.1), 10, True, 40, std_m=0.3)
     assert loc.restarts == 0 and np.all(err[10:] > 1.0)
+
+
+def test_alignment_chain_rejects_a_jump_against_odometry_and_follows_a_lasting_one():
+    """``AlignmentChain``: along a straight drive (5 cm a scan, odometry exact) confirmed poses
+    that jump 15 cm for three scans are rejected and the chain goes on where it was; an offset
+    of 20 cm that lasts is rejected four times, accepted at the fifth (``switch_scans``) and
+    followed from then on; after more than ``stale_m`` of travel without a confirmed pose any
+    pose starts the chain again."""
+    from gatmo.pipeline.stack import AlignmentChain
+
+    chain = AlignmentChain(tol_m=0.04, tol_per_m=0.05, tol_deg=2.0, tol_deg_per_m=1.0,
+                           stale_m=2.0, switch_scans=5)
+    truth = np.array([[0.05 * i, 1.0, 0.0] for i in range(120)])
+    odom = truth + [3.0, -2.0, 0.0]  # another frame, same motion
+    jump = np.array([0.15, 0.0, 0.0])
+
+    def offer(i, off=(0.0, 0.0, 0.0)):
+        return chain.accept(truth[i] + off, odom[i], 0.05 * i)
+
+    assert all(offer(i) for i in range(10))
+    assert [offer(i, jump) for i in range(10, 13)] == [False] * 3
+    assert all(offer(i) for i in range(13, 20))
+    lasting = np.array([0.0, 0.2, 0.0])
+    assert [offer(i, lasting) for i in range(20, 26)] == [False] * 4 + [True] * 2
+    assert not offer(26)  # the truth is now the jump
+    assert chain.n_rejected == 8
+    # 2.5 m without a confirmed pose: the next one starts the chain wherever it is
+    assert offer(77, jump) and offer(78, jump) and not offer(79)
+
+
+def test_gatmo_skips_a_confirmed_pose_that_jumps_against_odometry(monkeypatch):
+    """``align_chain_check``: the scan-to-map alignment confirms the truth on every scan but
+    scans 8-10, where it confirms a pose 0.2 m off; with the check GATMO is not handed those
+    three scans and the published pose stays on the truth; without it, it is handed them."""
+    from gatmo.pipeline import stack as stack_mod
+
+    grid = room_grid(12, 6, 0.05)
+    truth = _STRAIGHT[:20]
+    scans = [make_scan(grid, p, odom_pose_xytheta=p, stamp_s=0.1 * i)
+             for i, p in enumerate(truth)]
+    wrong = {8, 9, 10}
+
+    def refine(self, pose, scan):
+        i = int(round(scan.stamp_s / 0.1))
+        self.last_verified, self.last_outcome, self.last_tight_fraction = True, "confirmed", 1.0
+        return truth[i] + ([0.2, 0.0, 0.0] if i in wrong else 0.0), True
+
+    monkeypatch.setattr(stack_mod.MapAligner, "refine", refine)
+    for check in (False, True):
+        mapper = RecordingMapper(grid)
+        fusion = FusionConfig(align_chain_check=check, use_scan_matcher=False,
+                              mask_unexplained=False, mask_offset_objects=False)
+        stack = LocalizationStack(ScriptedLocalizer(truth, confident_at=range(20),
+                                                    bias=(0.03, 0.0, 0.0)),
+                                  None, mapper, fusion)
+        stack.begin_run(1)
+        out = [stack.step(s) for s in scans]
+        handed = [i for i, t in enumerate(mapper.trusted) if t]
+        err = np.hypot(*(np.array([o.pose_xytheta for o in out])[:, :2] - truth[:, :2]).T)
+        if check:
+            assert handed == [i for i in range(20) if i not in wrong]
+            assert [o.align_outcome for o in out[8:11]] == ["inconsistent"] * 3
+            assert np.all(err[8:11] < 0.01)  # carried from scan 7 by odometry
+        else:
+            assert handed == list(range(20))
+            assert np.all(err[8:11] > 0.19)
