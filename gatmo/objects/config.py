@@ -272,6 +272,18 @@ class GatmoConfig(GatmoModel):
         "it that path skips them, and a chair refused by them while its track lasted could "
         "take the object afterwards. Tuning seeds 300-319: false relocations 1.15 -> 1.00 "
         "per seed [-0.40, +0.10], found 18.1 % -> 17.8 %, ATE 0.150 -> 0.158 m")
+    part_ring_connected: bool = Field(
+        False, description="beyond the paper: the ring test of a match (part of something "
+        "larger) counts only the unexplained returns 0.1-0.4 m beyond the object's outline "
+        "that continue its own (8-connected through returns), and refuses at "
+        "part_ring_min_cells of them, instead of more than a quarter of its own cells: one "
+        "face of a bench running on past a footstool's outline is 6 cells against 25")
+    part_ring_min_cells: int = Field(3, ge=1)
+    match_gamma_part_check: bool = Field(
+        False, description="beyond the paper: an object matched to a Gamma object (at an "
+        "absence, match_absence_to_gamma, or at the run's end, match_gamma_to_absent) must "
+        "pass the ring test of a track's match: no more than a few unexplained returns this "
+        "run just outside its outline there (a footstool fits the corner of a sofa)")
     match_gamma_beam_check: bool = Field(
         False, description="beyond the paper: an object matched to a Gamma object seen this "
         "run (match_absence_to_gamma, match_gamma_to_absent) must pass the beam test of a "

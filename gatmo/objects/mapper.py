@@ -1323,12 +1323,15 @@ class GatmoMapper:
 
     def _ring_counts(self, o: MapObject, pose_xytheta: np.ndarray, counts: np.ndarray,
                      r_in_m: float, r_out_m: float, min_hits: int = 2,
-                     own_index: int | None = None) -> tuple[int, int]:
+                     own_index: int | None = None,
+                     connected: bool = False) -> tuple[int, int]:
         """(cells of the object placed at ``pose_xytheta``, cells of the ring ``r_in_m`` <
         d <= ``r_out_m`` beyond its outline) holding at least ``min_hits`` of ``counts``
         (a per-cell grid of returns this run). With ``own_index`` (the object's index in the
         map), ring cells nearer to another object or wall are left out. -1, -1 when the
-        object is off the map."""
+        object is off the map. ``connected``: only ring cells joined to the object's own cells
+        through cells holding ``min_hits`` (8-connected) count: what continues past its
+        outline, not something standing apart nearby."""
         g = self._grid
         cells = g.world_to_cell(o.cells_world(pose_xytheta, dense=True))
         ok = g.in_bounds(cells)
@@ -1346,16 +1349,26 @@ class GatmoMapper:
         if own_index is not None:
             ring &= (self._near_owner[win] == own_index) | \
                 (self._near_dist[win] > self.cfg.delta_W_m)
-        sub = counts[win]
-        return int((sub[mask] >= min_hits).sum()), int((sub[ring] >= min_hits).sum())
+        hit = counts[win] >= min_hits
+        if connected:
+            lab, _ = ndimage.label(hit & (d <= r_out_m), structure=np.ones((3, 3), dtype=bool))
+            own = np.unique(lab[mask & hit])
+            hit = np.isin(lab, own[own > 0])
+            return int((hit & mask).sum()), int((hit & ring).sum())
+        return int(hit[mask].sum()), int(hit[ring].sum())
 
     def _part_of_larger(self, o: MapObject, mt) -> bool:
         """Beyond the paper: unexplained returns this run just outside the object placed at the
         match (a ring 0.1-0.4 m beyond its outline) mean what was seen is a part of something
         larger; a footstool fits any corner of a desk."""
-        inside, outside = self._ring_counts(o, mt.pose_xytheta, self._unexplained, 0.1, 0.4)
+        c = self.cfg
+        inside, outside = self._ring_counts(o, mt.pose_xytheta, self._unexplained, 0.1, 0.4,
+                                            connected=c.part_ring_connected)
         if inside < 0:
             return True
+        if c.part_ring_connected:
+            # a face that runs on past the outline: a corner of a bench is no footstool
+            return bool(outside >= c.part_ring_min_cells)
         return bool(outside > max(3, 0.25 * inside))
 
     def _beams_consistent(self, o: MapObject, mt, views: list) -> bool:
@@ -1416,6 +1429,9 @@ class GatmoMapper:
             return None
         if not self._free_consistent(o, mt):
             self._refused(o, "gamma_free_space", pts)
+            return None
+        if self.cfg.match_gamma_part_check and self._part_of_larger(o, mt):
+            self._refused(o, "gamma_part_of_larger", pts)
             return None
         views = self._gamma_views.get(g.id) if self.cfg.match_gamma_beam_check else None
         if views and not self._beams_consistent(o, mt, views):

@@ -1482,3 +1482,47 @@ def test_an_absent_desk_is_not_put_onto_a_gamma_box_where_beams_went_on(beam_che
     else:  # the box stays in Gamma and joins the map at the run's end
         assert desk.status == "A"
         assert [e.kind for e in m.end_run() if e.object_id == gam[0]] == ["added"]
+
+
+@pytest.mark.parametrize(("connected", "relocated"), [(False, True), (True, False)])
+def test_an_absent_box_is_not_put_onto_the_end_of_a_bench_with_part_ring_connected(connected,
+                                                                                    relocated):
+    # map: a 0.6 m box at (2.7, 4.5); world: the box gone, a 2.0 x 0.6 m bench at x 5.0-7.0,
+    # y 2.0-2.6. The robot sees the bench's west end and south face (a 2 m laser, so the
+    # face fades out eastwards), then the box's place empty. The box fits the bench's west
+    # end; the south face runs on past its outline by 6 cells against its 25, which the
+    # default ring test lets through and the connected one does not
+    m, box, world = _one_object((10, 6), (2.4, 4.2, 3.0, 4.8), [(5.0, 2.0, 7.0, 2.6)],
+                                part_ring_connected=connected)
+    path = [(x, 0.9, 0.6) for x in np.linspace(4.0, 5.8, 30)]
+    path += [(x, 3.4, np.pi / 2) for x in np.linspace(1.5, 3.5, 30)]
+    events = _drive(m, world, path, max_range_m=2.0)
+    kinds = [e.kind for e in events if e.object_id == box.id]
+    assert kinds[0] == "absent", kinds
+    assert ("relocated" in kinds) == relocated, kinds
+    if relocated:  # onto the bench's west end
+        assert np.hypot(*(box.pose_xytheta[:2] - (5.3, 2.3))) < 0.15
+    else:
+        assert m.refusals.get((box.id, "part_of_larger"), 0) > 0, m.refusals
+
+
+@pytest.mark.parametrize("check", [False, True])
+def test_a_gamma_object_at_the_end_of_a_bench_is_no_absent_box_with_match_gamma_part_check(
+        check):
+    # the bench of the test above seen along its south face; a Gamma object made of its west
+    # end alone (0.6 m, as a track that saw only that end would leave). The absent box fits
+    # that end; the south face running on past the box's outline refuses it with the check
+    m, box, world = _one_object((10, 6), (2.4, 4.2, 3.0, 4.8), [(5.0, 2.0, 7.0, 2.6)],
+                                match_gamma_part_check=check)
+    _drive(m, world, [(x, 0.9, 0.6) for x in np.linspace(4.0, 5.8, 30)], max_range_m=2.0)
+    occ = world.occupied_cells_world()
+    end = occ[(occ[:, 0] < 5.6) & (occ[:, 0] > 4.9) & (occ[:, 1] > 1.9) & (occ[:, 1] < 2.7)
+              & ((occ[:, 0] < 5.1) | (occ[:, 1] < 2.1))]  # its west and south faces
+    m._gamma_part(end, 10.0, [], [])
+    g = m.object_map.Gamma[-1]
+    mt = m._fit_gamma(g, box)
+    assert (mt is None) == check
+    if check:
+        assert m.refusals.get((box.id, "gamma_part_of_larger"), 0) == 1
+    else:
+        assert np.hypot(*(mt.pose_xytheta[:2] - (5.3, 2.3))) < 0.1
