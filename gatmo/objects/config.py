@@ -277,7 +277,7 @@ class GatmoConfig(GatmoModel):
         "larger) counts only the unexplained returns 0.1-0.4 m beyond the object's outline "
         "that continue its own (8-connected through returns), and refuses at "
         "part_ring_min_cells of them, instead of more than a quarter of its own cells: one "
-        "face of a bench running on past a footstool's outline is 6 cells against 25")
+        "face of a bench running on past a 0.6 m box's outline is 6 cells against 25")
     part_ring_min_cells: int = Field(3, ge=1)
     match_gamma_part_check: bool = Field(
         False, description="beyond the paper: an object matched to a Gamma object (at an "
