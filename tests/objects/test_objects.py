@@ -1484,6 +1484,16 @@ def test_an_absent_desk_is_not_put_onto_a_gamma_box_where_beams_went_on(beam_che
         assert [e.kind for e in m.end_run() if e.object_id == gam[0]] == ["added"]
 
 
+def _box_gone_bench_new(**cfg_update):
+    """(mapper in run 1, its box, the world, the drive along the bench): a 10 x 6 m room
+    whose map has a 0.6 m box at (2.7, 4.5); in the world the box is gone and a 2.0 x 0.6 m
+    bench stands at x 5.0-7.0, y 2.0-2.6. The drive sees the bench's west end and south face
+    with a 2 m laser, so the face fades out eastwards."""
+    m, box, world = _one_object((10, 6), (2.4, 4.2, 3.0, 4.8), [(5.0, 2.0, 7.0, 2.6)],
+                                **cfg_update)
+    return m, box, world, [(x, 0.9, 0.6) for x in np.linspace(4.0, 5.8, 30)]
+
+
 @pytest.mark.parametrize(("connected", "relocated"), [(False, True), (True, False)])
 def test_an_absent_box_is_not_put_onto_the_end_of_a_bench_with_part_ring_connected(connected,
                                                                                     relocated):
@@ -1492,9 +1502,7 @@ def test_an_absent_box_is_not_put_onto_the_end_of_a_bench_with_part_ring_connect
     # face fades out eastwards), then the box's place empty. The box fits the bench's west
     # end; the south face runs on past its outline by 6 cells against its 25, which the
     # default ring test lets through and the connected one does not
-    m, box, world = _one_object((10, 6), (2.4, 4.2, 3.0, 4.8), [(5.0, 2.0, 7.0, 2.6)],
-                                part_ring_connected=connected)
-    path = [(x, 0.9, 0.6) for x in np.linspace(4.0, 5.8, 30)]
+    m, box, world, path = _box_gone_bench_new(part_ring_connected=connected)
     path += [(x, 3.4, np.pi / 2) for x in np.linspace(1.5, 3.5, 30)]
     events = _drive(m, world, path, max_range_m=2.0)
     kinds = [e.kind for e in events if e.object_id == box.id]
@@ -1512,9 +1520,8 @@ def test_a_gamma_object_at_the_end_of_a_bench_is_no_absent_box_with_match_gamma_
     # the bench of the test above seen along its south face; a Gamma object made of its west
     # end alone (0.6 m, as a track that saw only that end would leave). The absent box fits
     # that end; the south face running on past the box's outline refuses it with the check
-    m, box, world = _one_object((10, 6), (2.4, 4.2, 3.0, 4.8), [(5.0, 2.0, 7.0, 2.6)],
-                                match_gamma_part_check=check)
-    _drive(m, world, [(x, 0.9, 0.6) for x in np.linspace(4.0, 5.8, 30)], max_range_m=2.0)
+    m, box, world, path = _box_gone_bench_new(match_gamma_part_check=check)
+    _drive(m, world, path, max_range_m=2.0)
     occ = world.occupied_cells_world()
     end = occ[(occ[:, 0] < 5.6) & (occ[:, 0] > 4.9) & (occ[:, 1] > 1.9) & (occ[:, 1] < 2.7)
               & ((occ[:, 0] < 5.1) | (occ[:, 1] < 2.1))]  # its west and south faces
