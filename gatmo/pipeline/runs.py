@@ -166,15 +166,66 @@ def make_matcher(cfg):
     return ScanMatchOdometry.from_config(cfg.icp)
 
 
-def make_full_stack(cfg, mapper, seed: int, initial_pose) -> LocalizationStack:
-    """The full stack: the localizer on GATMO's current map (global localization when
-    ``initial_pose`` is None), the scan matcher if ``cfg.fusion.use_scan_matcher``, GATMO."""
+def make_full_stack(cfg, mapper, seed: int, initial_pose,
+                    loc_grid: OccupancyGrid | None = None) -> LocalizationStack:
+    """The full stack: the localizer on GATMO's current map, or on ``loc_grid`` fixed if given
+    (global localization when ``initial_pose`` is None), the scan matcher if
+    ``cfg.fusion.use_scan_matcher``, GATMO."""
+    grid = loc_grid if loc_grid is not None else mapper.grid()
     return LocalizationStack(
-        make_localizer(cfg, mapper.grid(), seed, initial_pose, initial_pose is None),
+        make_localizer(cfg, grid, seed, initial_pose, initial_pose is None),
         make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
         mapper,
         cfg.fusion,
+        loc_grid=loc_grid,
     )
+
+
+def run_full(cfg, mapper, scans: list, seed: int, initial_pose, **side_kwargs) -> RunTrace:
+    """The full stack over one log, ``cfg.fusion.passes`` times (offline).
+
+    Every pass after the first localizes on the map the pass before ended with, fixed, and
+    its GATMO starts again from the object map the run began with; the time per scan is the
+    sum over the passes. ``fusion.passes_objects``:
+    ``last`` keeps the last pass's poses and object map (the passes before run on copies of
+    ``mapper``); ``first`` keeps the first pass's object map (``mapper`` is updated by it, as
+    with one pass) and the last pass's poses: the trace's events and the poses handed to
+    GATMO are the first pass's, its published and localizer poses the last pass's.
+    ``side_kwargs`` go to :func:`run_side` for the pass
+    whose object map is kept."""
+    import copy
+    from dataclasses import replace
+
+    passes = cfg.fusion.passes
+    if passes == 1:
+        return run_side(make_full_stack(cfg, mapper, seed, initial_pose), scans, side="gatmo",
+                        **side_kwargs)
+    quiet = {"log": side_kwargs.get("log", ""), "run_id": side_kwargs["run_id"]}
+    start = copy.deepcopy(mapper)  # the object map the run began with
+    if cfg.fusion.passes_objects == "first":
+        kept = run_side(make_full_stack(cfg, mapper, seed, initial_pose), scans, side="gatmo",
+                        **side_kwargs)
+        loc_grid, ms = mapper.grid(), kept.ms.copy()
+        for k in range(1, passes):
+            trial = copy.deepcopy(start)
+            t = run_side(make_full_stack(cfg, trial, seed, initial_pose, loc_grid=loc_grid),
+                         scans, side="gatmo", **quiet)
+            ms += t.ms
+            if k < passes - 1:
+                loc_grid = trial.grid()
+        return replace(kept, poses_xytheta=t.poses_xytheta, ms=ms,
+                       localizer_poses_xytheta=t.localizer_poses_xytheta,
+                       confident=t.confident, resets=t.resets,
+                       relocalizations=t.relocalizations)
+    loc_grid, ms = None, np.zeros(len(scans))
+    for _ in range(passes - 1):
+        trial = copy.deepcopy(start)
+        ms += run_side(make_full_stack(cfg, trial, seed, initial_pose, loc_grid=loc_grid),
+                       scans, side="gatmo", **quiet).ms
+        loc_grid = trial.grid()
+    stack = make_full_stack(cfg, mapper, seed, initial_pose, loc_grid=loc_grid)
+    last = run_side(stack, scans, side="gatmo", **side_kwargs)
+    return replace(last, ms=last.ms + ms)
 
 
 def run_side(
@@ -399,11 +450,8 @@ def run_gatmo(
     pose0 = initial_pose_for(scans, initial_pose, global_localization)
     if pose0 is not None:
         check_overlap(base, scans[0], pose0, log)
-    stack = make_full_stack(cfg, mapper, cfg.seed, pose0)
-    trace = run_side(
-        stack, scans, log=str(log), side="gatmo", run_id=run_id, progress=progress,
-        total=len(scans),
-    )
+    trace = run_full(cfg, mapper, scans, cfg.seed, pose0, log=str(log), run_id=run_id,
+                     progress=progress, total=len(scans))
     write_trace(trace, out)
     write_object_map(mapper, base, out, _base_meta(Path(map_yaml), base))
     gt = ground_truth_of(scans, log, None)
@@ -525,8 +573,8 @@ def compare(
         static = LocalizationStack(make_localizer(cfg, base, seed, pose0, pose0 is None))
         t_static = run_side(static, scans, log=str(log), side="static", run_id=k + 1,
                             progress=_offset(progress, done), total=None, observer=observer)
-        gat = make_full_stack(cfg, mapper, seed, pose0)  # its localizer on grid_before
-        t_gatmo = run_side(gat, scans, log=str(log), side="gatmo", run_id=k + 1,
+        # its localizer on grid_before (and, with fusion.passes, the map a pass before ended with)
+        t_gatmo = run_full(cfg, mapper, scans, seed, pose0, log=str(log), run_id=k + 1,
                            progress=_offset(progress, done + len(scans)), total=None,
                            observer=observer)
         done += total

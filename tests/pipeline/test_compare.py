@@ -158,3 +158,49 @@ def test_a_run_trace_keeps_the_refusals_of_its_run():
     mapper.refusals.clear()
     assert t.refusals == {(3, "score"): 2, (3, "beams"): 1}  # a copy: the next run resets it
     assert run_side(Stack(None), [], log="l", side="static", run_id=1).refusals == {}
+
+
+@pytest.mark.parametrize("keep", ["last", "first"])
+def test_a_second_pass_localizes_on_the_map_the_first_ended_with(scen, keep, monkeypatch):
+    from gatmo.pipeline import runs
+    from gatmo.pipeline.config import sim_stack_config
+
+    cfg = sim_stack_config()
+    base = load_map(scen.map_yaml)
+    scans = runs.load_scans(scen.logs[0])
+    pose0 = scans[0].gt_pose_xytheta
+    gt = np.array([s.gt_pose_xytheta for s in scans])
+    one = runs._make_mapper(cfg, base, None)  # the same run in one pass
+    single = runs.run_full(cfg, one, scans, 0, pose0, log="a", run_id=1)
+
+    made = []
+    real = runs.make_full_stack
+
+    def spy(*a, **kw):
+        made.append(real(*a, **kw))
+        return made[-1]
+
+    monkeypatch.setattr(runs, "make_full_stack", spy)
+    cfg.fusion.passes, cfg.fusion.passes_objects = 2, keep
+    mapper = runs._make_mapper(cfg, base, None)
+    start = mapper.grid()
+    trace = runs.run_full(cfg, mapper, scans, 0, pose0, log="a", run_id=1)
+    first, second = made
+    # the first pass is the one-pass run: on the start map, updated as GATMO changes it
+    assert first.loc_grid is None and first.n_map_updates > 0
+    assert first.mapper.grid() == one.grid() and not first.mapper.grid() == start
+    # the second localizes on the map the first ended with, fixed, its GATMO starting again
+    assert second.loc_grid == one.grid() and second.n_map_updates == 0
+    assert second.mapper is not first.mapper
+    kept = first.mapper if keep == "first" else second.mapper
+    assert kept is mapper
+    # the object map kept is that pass's, and so are the events; the poses are the second's
+    if keep == "first":
+        assert mapper.grid() == one.grid()
+        assert [e["kind"] for e in trace.events] == [e["kind"] for e in single.events]
+        np.testing.assert_array_equal(trace.gatmo_poses_xytheta, single.gatmo_poses_xytheta)
+    else:
+        assert not mapper.grid() == start and trace.events
+    assert not np.array_equal(trace.poses_xytheta, single.poses_xytheta)
+    err = np.hypot(*(trace.poses_xytheta[:, :2] - gt[:, :2]).T)
+    assert np.median(err) < 0.1

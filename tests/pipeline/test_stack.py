@@ -1076,3 +1076,30 @@ def test_gatmo_skips_a_confirmed_pose_that_jumps_against_odometry(monkeypatch):
         else:
             assert handed == list(range(20))
             assert np.all(err[8:11] > 0.19)
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_a_stack_on_a_fixed_map_keeps_it_while_gatmo_changes_its_own(fixed):
+    # fusion.passes: a later pass localizes on the map the pass before ended with; GATMO's
+    # changes in that pass must not reach its localizer, the alignment or the relocalizer
+    truth = _truth()
+    loc = ScriptedLocalizer(truth, confident_at=range(len(truth)))
+    own, other = room_grid(12, 6, 0.05), room_grid(12, 6, 0.05)
+    other.cells[40:60, 40:60] = 100  # a box GATMO's map does not have
+
+    class Changing(RecordingMapper):
+        def pop_map_changes(self):  # a region every scan, as a relocation would queue
+            return [(np.zeros((3, 3), dtype=np.int8), 10, 10)]
+
+    fusion = FusionConfig(align_to_map=False)
+    stack = LocalizationStack(loc, None, Changing(own), fusion,
+                              loc_grid=other if fixed else None)
+    stack.begin_run(1)
+    for s in _scans(len(truth)):
+        stack.step(s)
+    if fixed:
+        assert loc.regions == [] and stack.n_map_updates == 0
+        assert stack.current_grid(own) is other and stack._map_grid() is other
+    else:
+        assert len(loc.regions) == len(truth) == stack.n_map_updates
+        assert stack.current_grid(other) is own and stack._map_grid() is own
