@@ -12,10 +12,11 @@ log (unreadable file, ground truth that does not match) keeps what was already c
 
 from __future__ import annotations
 
+import copy
 import json
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -185,47 +186,27 @@ def run_full(cfg, mapper, scans: list, seed: int, initial_pose, **side_kwargs) -
     """The full stack over one log, ``cfg.fusion.passes`` times (offline).
 
     Every pass after the first localizes on the map the pass before ended with, fixed, and
-    its GATMO starts again from the object map the run began with; the time per scan is the
-    sum over the passes. ``fusion.passes_objects``:
-    ``last`` keeps the last pass's poses and object map (the passes before run on copies of
-    ``mapper``); ``first`` keeps the first pass's object map (``mapper`` is updated by it, as
-    with one pass) and the last pass's poses: the trace's events and the poses handed to
-    GATMO are the first pass's, its published and localizer poses the last pass's.
-    ``side_kwargs`` go to :func:`run_side` for the pass
-    whose object map is kept."""
-    import copy
-    from dataclasses import replace
-
+    its GATMO starts again from the object map the run began with. ``fusion.passes_objects``
+    names the pass that updates ``mapper`` (the others run on copies): its events, refusals
+    and poses handed to GATMO are the trace's; the published and localizer poses are the last
+    pass's, and the time per scan the sum over the passes. ``side_kwargs`` go to
+    :func:`run_side` for the pass whose object map is kept."""
     passes = cfg.fusion.passes
-    if passes == 1:
-        return run_side(make_full_stack(cfg, mapper, seed, initial_pose), scans, side="gatmo",
-                        **side_kwargs)
+    keep = 0 if cfg.fusion.passes_objects == "first" else passes - 1
+    start = copy.deepcopy(mapper) if passes > 1 else None  # the object map the run began with
     quiet = {"log": side_kwargs.get("log", ""), "run_id": side_kwargs["run_id"]}
-    start = copy.deepcopy(mapper)  # the object map the run began with
-    if cfg.fusion.passes_objects == "first":
-        kept = run_side(make_full_stack(cfg, mapper, seed, initial_pose), scans, side="gatmo",
-                        **side_kwargs)
-        loc_grid, ms = mapper.grid(), kept.ms.copy()
-        for k in range(1, passes):
-            trial = copy.deepcopy(start)
-            t = run_side(make_full_stack(cfg, trial, seed, initial_pose, loc_grid=loc_grid),
-                         scans, side="gatmo", **quiet)
-            ms += t.ms
-            if k < passes - 1:
-                loc_grid = trial.grid()
-        return replace(kept, poses_xytheta=t.poses_xytheta, ms=ms,
-                       localizer_poses_xytheta=t.localizer_poses_xytheta,
-                       confident=t.confident, resets=t.resets,
-                       relocalizations=t.relocalizations)
     loc_grid, ms = None, np.zeros(len(scans))
-    for _ in range(passes - 1):
-        trial = copy.deepcopy(start)
-        ms += run_side(make_full_stack(cfg, trial, seed, initial_pose, loc_grid=loc_grid),
-                       scans, side="gatmo", **quiet).ms
-        loc_grid = trial.grid()
-    stack = make_full_stack(cfg, mapper, seed, initial_pose, loc_grid=loc_grid)
-    last = run_side(stack, scans, side="gatmo", **side_kwargs)
-    return replace(last, ms=last.ms + ms)
+    for k in range(passes):
+        m = mapper if k == keep else copy.deepcopy(start)
+        t = run_side(make_full_stack(cfg, m, seed, initial_pose, loc_grid=loc_grid), scans,
+                     side="gatmo", **(side_kwargs if k == keep else quiet))
+        ms += t.ms
+        loc_grid = m.grid()
+        if k == keep:
+            kept = t
+    return replace(kept, poses_xytheta=t.poses_xytheta, ms=ms,
+                   localizer_poses_xytheta=t.localizer_poses_xytheta, confident=t.confident,
+                   resets=t.resets, relocalizations=t.relocalizations)
 
 
 def run_side(
