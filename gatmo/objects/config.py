@@ -284,6 +284,24 @@ class GatmoConfig(GatmoModel):
         "absence, match_absence_to_gamma, or at the run's end, match_gamma_to_absent) must "
         "pass the ring test of a track's match: no more than a few unexplained returns this "
         "run just outside its outline there (a footstool fits the corner of a sofa)")
+    match_extent_check: bool = Field(
+        False, description="beyond the paper: a chair whose returns in one scan reach past "
+        "the object's sides (its cells' smallest rectangle) by more than "
+        "match_extent_max_excess_m is not that object, on the tracks' and the Gamma objects' "
+        "match paths (matching.extent_excess). One scan's returns are not smeared by the "
+        "pose's error from scan to scan, so a 0.50 m box seen end to end reaches past a "
+        "0.45 m footstool's outline, which the blurred edge score cannot tell. On in "
+        "sim_stack_config: the threshold hangs on how the map was drawn")
+    match_extent_max_excess_m: float = Field(
+        0.02, ge=-0.2, le=0.5, description="how far a chair's sides, one scan at a time, may "
+        "reach past the object's cells' smallest rectangle [m]. Set on the simulator's maps, "
+        "which occupy every cell a piece overlaps: along a turned piece's sides their "
+        "centres reach 3.5-4.6 cm past it on average. A map that marks the cell each return "
+        "lands in, or each cell whose centre is inside, has centres up to a cell short of "
+        "a side's ends (a piece square to the grid): there about a cell more is needed")
+    match_extent_record: bool = Field(
+        False, description="diagnostics: compute the extent test's verdicts "
+        "(GatmoMapper.extent_seen) without refusing anything")
     match_gamma_beam_check: bool = Field(
         False, description="beyond the paper: an object matched to a Gamma object seen this "
         "run (match_absence_to_gamma, match_gamma_to_absent) must pass the beam test of a "

@@ -33,7 +33,13 @@ from gatmo.geometry import compose, inverse, transform_points
 from gatmo.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
-from gatmo.objects.matching import EdgeField, beam_consistency, lookalike, match_points
+from gatmo.objects.matching import (
+    EdgeField,
+    beam_consistency,
+    extent_excess,
+    lookalike,
+    match_points,
+)
 from gatmo.objects.meanshift import mean_shift
 from gatmo.objects.metaobject import Metaobject
 from gatmo.objects.objectmap import MapObject, ObjectMap, shape_from_points
@@ -170,6 +176,11 @@ class GatmoMapper:
         # the scans that saw them this run (their tracks' views), for the beam test of a
         # later match (match_gamma_beam_check)
         self._gamma_views: dict[int, list] = {}
+        # and their returns per scan (Metaobject.scan_points), for the extent test
+        self._gamma_points: dict[int, list] = {}
+        # the extent test's verdicts: (object id, match x, y rounded to 1 cm) -> how far the
+        # chair reached beyond the object there [m] (matching.extent_excess; for diagnostics)
+        self.extent_seen: dict[tuple[int, float, float], float] = {}
         # per (object id, test): how often a chair was refused as this object this run
         self.refusals: dict[tuple[int, str], int] = {}
         # and where the refused chairs were: (object id, test) -> their centres (x, y) [m],
@@ -297,6 +308,8 @@ class GatmoMapper:
         self._unexplained_dilated = None
         self._near_returns[:] = 0
         self._reset_run_evidence()
+        self._gamma_views.clear()  # "seen this run": a Gamma object's scans of a run before
+        self._gamma_points.clear()  # saw another layout
         self._run_open = True
 
     def end_run(self) -> list[Event]:
@@ -1205,6 +1218,8 @@ class GatmoMapper:
         mt = self._match(pts, o, m.views)
         if mt.score < self.cfg.match_min_score:
             return "score"
+        if self._extends_beyond(o, mt, m.scan_points):
+            return "extent"
         if not self._free_ok(o, mt, m.views):
             return "free_space"
         # every return the track ever had must fit too, or this is a part of something
@@ -1371,6 +1386,20 @@ class GatmoMapper:
             return bool(outside >= c.part_ring_min_cells)
         return bool(outside > max(3, 0.25 * inside))
 
+    def _extends_beyond(self, o: MapObject, mt, scan_points: list) -> bool:
+        """With ``match_extent_check``: what single scans saw of the chair reaches more than
+        ``match_extent_max_excess_m`` beyond ``o`` placed at ``mt`` along one of its sides
+        (:func:`extent_excess`). With ``match_extent_record`` the verdict is kept in
+        :attr:`extent_seen` and nothing is refused."""
+        if not (self.cfg.match_extent_check or self.cfg.match_extent_record):
+            return False
+        ex = extent_excess(o, mt.pose_xytheta, scan_points)
+        if ex is None:
+            return False
+        key = (o.id, round(float(mt.pose_xytheta[0]), 2), round(float(mt.pose_xytheta[1]), 2))
+        self.extent_seen[key] = ex
+        return self.cfg.match_extent_check and ex > self.cfg.match_extent_max_excess_m
+
     def _beams_consistent(self, o: MapObject, mt, views: list) -> bool:
         """Beyond the paper: of the beams of the scans that saw the chair (``views``, as
         :attr:`Metaobject.views`) which the object at the match would have stopped, at most
@@ -1426,6 +1455,9 @@ class GatmoMapper:
             return None
         if mt.score < self.cfg.match_min_score:
             self._refused(o, "gamma_score", pts)
+            return None
+        if self._extends_beyond(o, mt, self._gamma_points.get(g.id, [])):
+            self._refused(o, "gamma_extent", pts)
             return None
         if not self._free_consistent(o, mt):
             self._refused(o, "gamma_free_space", pts)
@@ -1556,11 +1588,13 @@ class GatmoMapper:
         gap = self.cfg.gamma_split_gap_m
         for part in ([pts] if gap is None else _split_cells(pts, self._grid.resolution_m, gap)):
             if len(part) >= self.cfg.chair_min_cells:
-                self._gamma_part(part, stamp_s, events, m.views)
+                self._gamma_part(part, stamp_s, events, m.views, m.scan_points)
 
-    def _gamma_part(self, pts: np.ndarray, stamp_s, events, views: list) -> None:
+    def _gamma_part(self, pts: np.ndarray, stamp_s, events, views: list,
+                    scan_points: list | None = None) -> None:
         """Cells ``pts`` (P, 2) of a chair become a Gamma object, or join the one they overlap;
-        ``views``: the scans of its track that saw it (:attr:`Metaobject.views`)."""
+        ``views``: the scans of its track that saw it (:attr:`Metaobject.views`), and
+        ``scan_points`` their returns on it (:attr:`Metaobject.scan_points`)."""
         # a part of an object the map already has where it stands (seen before it was placed
         # there) is no new object
         near, _ = self._explained(pts)
@@ -1576,6 +1610,7 @@ class GatmoMapper:
             same.seen_count += 1
             self._gamma_this_run.add(same.id)
             self._gamma_views.setdefault(same.id, []).extend(views)
+            self._gamma_points.setdefault(same.id, []).extend(scan_points or [])
             self._fields.pop(same.id, None)
             self._inner.pop(same.id, None)
             self._cores.pop(same.id, None)
@@ -1588,6 +1623,7 @@ class GatmoMapper:
         self.object_map.objects.append(o)
         self._gamma_this_run.add(o.id)
         self._gamma_views[o.id] = list(views)
+        self._gamma_points[o.id] = list(scan_points or [])
         events.append(Event(float(stamp_s), self.run, "gamma", o.id, None, None,
                             pose.tolist()))
         self.counts["gamma"] += 1

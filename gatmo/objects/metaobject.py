@@ -43,6 +43,9 @@ class Metaobject:
         self.waited = False  # a match was held back as ambiguous (GatmoMapper._ambiguous)
         # the scans that saw it (set by the mapper): laser pose, angles, ranges, reach
         self.views: list[tuple] = []
+        # the returns (K, 2) of each scan that fed it, map frame (as views: at most 48, every
+        # other dropped past that), for the extent test of a match (matching.extent_excess)
+        self.scan_points: list[np.ndarray] = []
         self._add(points, stamp_s, verified)
 
     # -------------------------------------------------------------- hypotheses
@@ -98,6 +101,9 @@ class Metaobject:
 
     def _add(self, points: np.ndarray, stamp_s: float, verified: bool = True) -> None:
         c = points.mean(axis=0)
+        self.scan_points.append(np.asarray(points, dtype=float).copy())
+        if len(self.scan_points) > 48:
+            self.scan_points = self.scan_points[::2]
         if self.n_obs:
             self.kf.update(c)
         self.centres.append(c)
@@ -223,6 +229,7 @@ class Metaobject:
         for v in other.views:
             if all(v is not w for w in self.views):
                 self.add_view(v)
+        self.scan_points = (self.scan_points + other.scan_points)[-48:]
         for k, v in other.evidence.items():
             self.evidence[k] = self.evidence.get(k, 0) + v
         for k, v in other.evidence_verified.items():

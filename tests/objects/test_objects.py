@@ -1533,3 +1533,67 @@ def test_a_gamma_object_at_the_end_of_a_bench_is_no_absent_box_with_match_gamma_
         assert m.refusals.get((box.id, "gamma_part_of_larger"), 0) == 1
     else:
         assert np.hypot(*(mt.pose_xytheta[:2] - (5.3, 2.3))) < 0.1
+
+
+@pytest.mark.parametrize(("length_m", "check", "relocated"),
+                         [(0.5, True, True), (0.65, True, False), (0.65, False, True)])
+def test_a_chair_longer_than_the_absent_box_is_not_it_with_match_extent_check(length_m, check,
+                                                                               relocated):
+    # map: a 0.5 m box at (6, 2); world: the box gone, a piece at (3.9, 4.3) turned 0.4 rad,
+    # the box itself or one 0.15 m longer (its diagonal passes the "larger" test's 3 cells
+    # of slack, and it fits the box's blurred edges). One scan at a time, the longer piece's
+    # sides run past the box's outline. This grid world puts surfaces on cell faces, half a
+    # cell beyond the map's cell centres on each side (the box itself reaches 5 cm past
+    # them; in a map built from scans the centres lie on the surfaces or beyond), hence the
+    # threshold of 0.08 m instead of the default 0.02 m
+    g = room_grid(10, 6, 0.05, boxes=[(6.0, 2.0, 6.5, 2.5)])
+    world = with_rotated_box(room_grid(10, 6, 0.05), (3.9, 4.3), length_m, 0.5, 0.4)
+    cfg = CFG.model_copy(update={"match_extent_check": check,
+                                 "match_extent_max_excess_m": 0.08})
+    m = GatmoMapper(ObjectMap.from_grid(g, cfg), g, cfg)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    m.begin_run(1)
+    path = [(x, 2.9, 0.0) for x in np.linspace(2.0, 5.0, 40)]
+    path += [(5.0, 2.9, th) for th in np.linspace(0, 2.6, 20)]
+    path += [(5.0 - 0.02 * k, 2.9 + 0.01 * k, 2.6) for k in range(40)]
+    events = _drive(m, world, path, max_range_m=6.0)
+    kinds = [e.kind for e in events if e.object_id == box.id]
+    assert kinds[0] == "absent", kinds
+    assert ("relocated" in kinds) == relocated, (kinds, m.refusals)
+    if relocated:
+        assert np.hypot(*(box.pose_xytheta[:2] - (3.9, 4.3))) < 0.15
+    else:
+        assert m.refusals.get((box.id, "extent"), 0) > 0, m.refusals
+    assert any(k[0] == box.id for k in m.extent_seen) == check
+
+
+@pytest.mark.parametrize(("length_m", "check", "fits"),
+                         [(0.5, True, True), (0.6, True, False), (0.6, False, True)])
+def test_a_gamma_object_longer_than_the_absent_box_is_not_it_with_match_extent_check(
+        length_m, check, fits):
+    # the Gamma path of the test above: a chair seen from a corner (two sides, 3 cm between
+    # returns, 1 cm noise, 9 scans) joins Gamma with its returns; matched to the 0.5 m box
+    # it fits the blurred edges either way, and its sides reach past the box's when 0.1 m
+    # longer (here the returns lie on the surfaces and the map's cell centres span the box's
+    # sides exactly: the box itself reaches about 2 cm past them, by the noise)
+    rng = np.random.default_rng(5)
+    g = room_grid(10, 6, 0.05, boxes=[(6.0, 2.0, 6.5, 2.5)])
+    cfg = CFG.model_copy(update={"match_extent_check": check,
+                                 "match_extent_max_excess_m": 0.05})
+    m = GatmoMapper(ObjectMap.from_grid(g, cfg), g, cfg)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    m.begin_run(1)
+    pose = np.array([3.9, 4.3, 0.4])
+    a = np.arange(0.0, length_m + 1e-9, 0.03)
+    b = np.arange(0.0, 0.5 + 1e-9, 0.03)
+    sides = np.vstack([np.c_[a - length_m / 2, np.full_like(a, -0.25)],
+                       np.c_[np.full_like(b, length_m / 2), b - 0.25]])
+    scans = [transform_points(pose, sides + rng.normal(0.0, 0.01, sides.shape))
+             for _ in range(9)]
+    cells = (np.unique(np.floor(np.vstack(scans) / 0.05).astype(int), axis=0) + 0.5) * 0.05
+    m._gamma_part(cells, 1.0, [], [], scans)
+    gamma = m.object_map.Gamma[-1]
+    mt = m._fit_gamma(gamma, box)
+    assert (mt is not None) == fits, m.refusals
+    if not fits:
+        assert m.refusals.get((box.id, "gamma_extent"), 0) == 1
