@@ -54,8 +54,8 @@ def real_log_config(demo_model: bool = False):
         a.laser_model, a.sigma_hit_m, a.z_hit, a.z_rand = "likelihood_field", 0.2, 0.5, 0.5
     # the extent test's threshold is set for the simulator's maps (every cell a piece overlaps
     # occupied); on Intel's map, drawn from the returns, the demo configuration refused with it
-    # the two small relocations of pieces standing where they were and moved a third 0.38 m
-    # instead (thirty-sixth session): off here, as in GatmoConfig
+    # the two small relocations (8 and 10 cm, half a turn) and moved a third piece 0.38 m
+    # instead (docs/experiments.md, thirty-sixth session): off here, as in GatmoConfig
     cfg.gatmo.match_extent_check = False
     return cfg
 
