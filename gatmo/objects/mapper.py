@@ -178,8 +178,9 @@ class GatmoMapper:
         self._gamma_views: dict[int, list] = {}
         # and their returns per scan (Metaobject.scan_points), for the extent test
         self._gamma_points: dict[int, list] = {}
-        # the extent test's verdicts: (object id, match x, y rounded to 1 cm) -> how far the
-        # chair reached beyond the object there [m] (matching.extent_excess; for diagnostics)
+        # the extent test's verdicts this run: (object id, match x, y rounded to 1 cm) -> how
+        # far the chair reached beyond the object there [m] (matching.extent_excess; for
+        # diagnostics)
         self.extent_seen: dict[tuple[int, float, float], float] = {}
         # per (object id, test): how often a chair was refused as this object this run
         self.refusals: dict[tuple[int, str], int] = {}
@@ -310,6 +311,7 @@ class GatmoMapper:
         self._reset_run_evidence()
         self._gamma_views.clear()  # "seen this run": a Gamma object's scans of a run before
         self._gamma_points.clear()  # saw another layout
+        self.extent_seen.clear()  # a long-lived mapper keeps one run's verdicts, not all
         self._run_open = True
 
     def end_run(self) -> list[Event]:
@@ -1393,7 +1395,7 @@ class GatmoMapper:
         :attr:`extent_seen` and nothing is refused."""
         if not (self.cfg.match_extent_check or self.cfg.match_extent_record):
             return False
-        ex = extent_excess(o, mt.pose_xytheta, scan_points)
+        ex = extent_excess(o, mt.pose_xytheta, scan_points, rect=self._field(o).rect)
         if ex is None:
             return False
         key = (o.id, round(float(mt.pose_xytheta[0]), 2), round(float(mt.pose_xytheta[1]), 2))

@@ -24,7 +24,8 @@ class EdgeField:
     """exp(-d^2 / 2 sigma^2) of the distance d to the object's edge points, in its own frame
     (the paper's "grids formed by adding a Gaussian distribution around each edge point"), at
     two widths: ``sigma_m`` for scoring and 2.5 sigma for the coarse search. Also keeps the
-    object's dominant edge directions (:func:`line_directions`)."""
+    object's dominant edge directions (:func:`line_directions`) and its cells' smallest
+    rectangle (:func:`min_rect`)."""
 
     def __init__(self, obj: MapObject, sigma_m: float, pad_m: float = 1.0):
         res = obj.resolution_m / 2.0
@@ -42,6 +43,7 @@ class EdgeField:
         self.extent_m = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
         self.lines = line_directions(pts)
         self.principal = principal_angle(pts)
+        self.rect = min_rect(obj.shape_xy)
 
     def score(self, q_xy: np.ndarray) -> np.ndarray:
         """Mean field value of point sets q (..., P, 2) in the object frame -> (...)."""
@@ -328,7 +330,8 @@ def longest_sides(spans: list) -> np.ndarray | None:
     return s[-2] if len(s) >= 3 else s[-1]
 
 
-def extent_excess(obj: MapObject, pose_xytheta: np.ndarray, scan_points: list) -> float | None:
+def extent_excess(obj: MapObject, pose_xytheta: np.ndarray, scan_points: list,
+                  rect: tuple | None = None) -> float | None:
     """How far what single scans saw of a chair reaches past the object ``obj`` placed at
     ``pose_xytheta`` (map frame) [m]: the chair's :func:`longest_sides` of the
     :func:`side_spans` of each scan's returns ``scan_points`` ((K, 2) per scan, map frame)
@@ -337,8 +340,9 @@ def extent_excess(obj: MapObject, pose_xytheta: np.ndarray, scan_points: list) -
     a 0.50 m box reaches past a 0.45 m footstool's outline, which the blurred edge score
     cannot tell (both fit within a cell). How far the cells reach past the surfaces hangs on
     how the map was drawn (0 to a cell in the simulator's maps, by where the grid falls).
-    None: no scan had 3 returns near the object."""
-    rect = min_rect(obj.shape_xy)
+    ``rect``: the object's :func:`min_rect`, if known (:attr:`EdgeField.rect`). None: no
+    scan had 3 returns near the object."""
+    rect = min_rect(obj.shape_xy) if rect is None else rect
     spans = [sp for p in scan_points
              if (sp := side_spans(obj, pose_xytheta, np.asarray(p, dtype=float), rect=rect))
              is not None]
