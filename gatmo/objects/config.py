@@ -37,6 +37,11 @@ class GatmoConfig(GatmoModel):
     absence_margin_m: float = Field(0.15, ge=0, description="count only cells this far inside")
     absence_beyond_m: float = Field(0.4, gt=0, description="a return this far beyond = gone")
     hit_tolerance_m: float = Field(0.15, gt=0, description="a return this near = there")
+    no_return_hits: bool = Field(
+        False, description="the behaviour before 2026-11-28 (thirty-seventh session), for "
+        "comparison: a beam with no return (at the laser's range limit) counts as ending on "
+        "an object the map expects within hit_tolerance_m of that limit, evidence that the "
+        "object stands there")
     absence_min_beams: int = Field(8, ge=1, description="beams through it before absent")
     absence_through_fraction: float = Field(0.75, gt=0, le=1,
                                             description="of beams through or on it, through")
@@ -302,6 +307,18 @@ class GatmoConfig(GatmoModel):
     match_extent_record: bool = Field(
         False, description="diagnostics: compute the extent test's verdicts "
         "(GatmoMapper.extent_seen) without refusing anything")
+    match_rank_extent: bool = Field(
+        False, description="beyond the paper: among a chair's candidates of the same tier, "
+        "earlier pose and edge score (to 0.05), the one the chair's sides reach less far past "
+        "(extent_excess above 0, to 0.01 m) ranks first, before nearness: a 0.50 m box's chair "
+        "is the box's, not a footstool's that fits as well and stands nearer. Needs "
+        "match_extent_check or match_extent_record")
+    match_absence_reclaims: bool = Field(
+        False, description="beyond the paper, its \"regardless of which was seen first\" "
+        "for chairs already matched: an object noticed gone takes a chair a track matched "
+        "to another object earlier in the run if it ranks above that match (as it would "
+        "have, a candidate then); the other object goes back to where it was, with a "
+        "'withdrawn' event")
     match_gamma_beam_check: bool = Field(
         False, description="beyond the paper: an object matched to a Gamma object seen this "
         "run (match_absence_to_gamma, match_gamma_to_absent) must pass the beam test of a "

@@ -49,7 +49,7 @@ from gatmo.objects.objectmap import MapObject, ObjectMap, shape_from_points
 class Event:
     stamp_s: float
     run: int
-    kind: str  # absent | relocated | restored | movable | added | gamma
+    kind: str  # absent | relocated | restored | withdrawn | movable | added | gamma
     object_id: int
     label: str | None = None
     pose_old: list | None = None
@@ -61,10 +61,12 @@ class Event:
         return dict(self.__dict__)
 
 
-def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
+def _rank_key(o: MapObject, mt, tier: int, earlier: bool, excess_m: float = 0.0) -> tuple:
     """How a match ``mt`` of ``o`` ranks among others: tier first, then at an earlier pose (its
-    prior), the score to 0.05, then nearness to where ``o`` is (look-alikes: the nearest)."""
-    return (tier, earlier, round(mt.score * 20) / 20,
+    prior), the score to 0.05, then how far the chair reaches past ``o`` (``excess_m`` >= 0,
+    0 unless ``match_rank_extent``; the less the better), then nearness to where ``o`` is
+    (look-alikes: the nearest)."""
+    return (tier, earlier, round(mt.score * 20) / 20, -excess_m,
             -float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))))
 
 
@@ -141,7 +143,8 @@ class GatmoMapper:
                        "skipped_disagreement": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
                        "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0,
-                       "absent_to_gamma": 0, "settle_refused": 0, "ambiguous_refused": 0}
+                       "absent_to_gamma": 0, "settle_refused": 0, "ambiguous_refused": 0,
+                       "withdrawn": 0}
         self._ms: list[float] = []
         self._beams = None
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
@@ -187,6 +190,10 @@ class GatmoMapper:
         # and where the refused chairs were: (object id, test) -> their centres (x, y) [m],
         # rounded to 0.1 m (the benchmark tells the chair at a piece's new place from others)
         self.refused_at: dict[tuple[int, str], set[tuple[float, float]]] = {}
+        # the tracks that matched a chair this run, with what their match displaced:
+        # (track, object id, its pose, status and moved count before, the match's rank key)
+        # (match_absence_reclaims)
+        self._taken: list[tuple] = []
         # the nudge (beyond the paper): per object id, the cells (ix, iy) returns that missed
         # it landed on -> in how many scans, the scans, their views, and the scans at the
         # last try
@@ -939,6 +946,8 @@ class GatmoMapper:
         own_deeper[inside] = self._owner[deeper[inside, 1], deeper[inside, 0]]
         through = ok & (r > expected + c.absence_beyond_m) & (own_deeper == own)
         on = ok & (np.abs(r - expected) <= c.hit_tolerance_m)
+        if not c.no_return_hits:
+            on &= scan.valid
         # beyond absence_max_range_m a heading error of a degree moves a beam by more than a
         # small object's width: such beams are no evidence for or against an object
         own_near = np.where(expected <= c.absence_max_range_m, own, -1)
@@ -1062,6 +1071,8 @@ class GatmoMapper:
             elif g in self.object_map.objects:
                 self.object_map.objects.remove(g)
                 self._relocate(o, mt, stamp_s, events)
+        if self.cfg.match_absence_reclaims and o.status == "A" and not o.structure:
+            self._reclaim(o, stamp_s, events)
 
     # ---------------------------------------------------------- metaobjects
     def _track(self, pts, stamp_s, events, verified: bool = True) -> None:
@@ -1241,7 +1252,19 @@ class GatmoMapper:
             return "not_earlier"
         if tier in (1, -2):  # a shift nearby, or back where it stood: as good as doubted
             tier = 0
-        return _rank_key(o, mt, tier, earlier), mt
+        return _rank_key(o, mt, tier, earlier, self._rank_excess(o, mt)), mt
+
+    def _rank_excess(self, o: MapObject, mt) -> float:
+        """With ``match_rank_extent``: how far the chair matched to ``o`` at ``mt`` reached
+        past it (the extent test's verdict just computed, above 0, to 0.01 m), else 0."""
+        if not self.cfg.match_rank_extent:
+            return 0.0
+        ex = self.extent_seen.get(self._extent_key(o, mt))
+        return 0.0 if ex is None else round(max(ex, 0.0) * 100) / 100
+
+    @staticmethod
+    def _extent_key(o: MapObject, mt) -> tuple:
+        return (o.id, round(float(mt.pose_xytheta[0]), 2), round(float(mt.pose_xytheta[1]), 2))
 
     def _try_match(self, m: Metaobject, stamp_s, events, settle: bool = False) -> bool:
         """Match the chair of track ``m`` to the best candidate (:meth:`_candidates`) that
@@ -1286,9 +1309,51 @@ class GatmoMapper:
                 if (o2 is not o and k2[:2] == best[0][:2] and k2[2] >= best[0][2] - 0.05
                         and not lookalike(o2, o, self.cfg.lookalike_tolerance)):
                     return False
+        if self.cfg.match_absence_reclaims:
+            self._taken.append((m, o.id, o.pose_xytheta.copy(), o.status, o.moved_count,
+                                best[0]))
         self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)
         m.matched_object = o.id
         return True
+
+    def _reclaim(self, o: MapObject, stamp_s, events) -> None:
+        """With ``match_absence_reclaims``: ``o``, just noticed gone, takes the chair of a
+        track that matched another object earlier this run if ``o`` ranks above that object
+        on the chair as it is now (:func:`_rank_key` before nearness: tier, earlier pose,
+        score to 0.05, reach past the outline), as it would have had it been gone then; the
+        best such chair first. Not from a look-alike (twins tie but for nearness, and a
+        grown chair's score is no evidence between them). The other object goes back to
+        its pose and list before the match (a 'withdrawn' event)."""
+        best = None
+        for i, (m, pid, _, _, _, key) in enumerate(self._taken):
+            prev = self.object_map.by_id.get(pid)
+            if (prev is None or m.matched_object != pid or prev.status not in ("U", "M")
+                    or lookalike(prev, o, self.cfg.lookalike_tolerance)):
+                continue
+            view = self._chair_view(m)
+            fit = None if view is None else self._fit(m, o, 0, view)
+            if fit is None:
+                continue
+            held = self._match(view[0], prev, m.views)  # the holder on the chair as it is now
+            self._extends_beyond(prev, held, m.scan_points)  # (records its reach, for the key)
+            now = _rank_key(prev, held, key[0], key[1], self._rank_excess(prev, held))
+            if fit[0][:4] > now[:4] and (best is None or fit[0] > best[0]):
+                best = (fit[0], i, fit[1])
+        if best is None:
+            return
+        _, i, mt = best
+        m, pid, pose, status, moved_count, _ = self._taken.pop(i)
+        prev = self.object_map.by_id[pid]
+        events.append(Event(float(stamp_s), self.run, "withdrawn", prev.id, prev.label,
+                            prev.pose_xytheta.tolist(),
+                            pose.tolist() if status in ("U", "M") else None))
+        prev.pose_xytheta, prev.status, prev.moved_count = pose, status, moved_count
+        prev.record(self.run, stamp_s)
+        self._clear_evidence(prev.id)
+        self.counts["withdrawn"] += 1
+        self._taken.append((m, o.id, o.pose_xytheta.copy(), o.status, o.moved_count, best[0]))
+        self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)
+        m.matched_object = o.id
 
     def _settle(self, m: Metaobject, stamp_s, events) -> bool:
         """A leaving track whose match waited on ambiguity takes its best match now, with
@@ -1398,8 +1463,7 @@ class GatmoMapper:
         ex = extent_excess(o, mt.pose_xytheta, scan_points, rect=self._field(o).rect)
         if ex is None:
             return False
-        key = (o.id, round(float(mt.pose_xytheta[0]), 2), round(float(mt.pose_xytheta[1]), 2))
-        self.extent_seen[key] = ex
+        self.extent_seen[self._extent_key(o, mt)] = ex
         return self.cfg.match_extent_check and ex > self.cfg.match_extent_max_excess_m
 
     def _beams_consistent(self, o: MapObject, mt, views: list) -> bool:
@@ -1494,7 +1558,8 @@ class GatmoMapper:
         if strict and self._ambiguous(None, o, mt, view):
             self._refused(o, "gamma_ambiguous", pts)
             return None
-        return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
+        return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta),
+                         self._rank_excess(o, mt)), mt
 
     def _far(self, o: MapObject, mt) -> bool:
         """The match ``mt`` puts ``o`` more than ``doubt_search_m`` from where it is."""

@@ -41,6 +41,21 @@ def _zoom(ax, *trajs) -> None:
     ax.set_ylim(lo[1], hi[1])
 
 
+def shown_moves(events: list[dict]) -> list[dict]:
+    """The relocation and addition events (as dicts, in order) the map picture draws: those
+    with a new pose, less each relocation a later 'withdrawn' event took back."""
+    shown: list[dict] = []
+    for ev in events:
+        if ev.get("kind") in ("relocated", "added") and ev.get("pose_new") is not None:
+            shown.append(ev)
+        elif ev.get("kind") == "withdrawn":
+            last = [i for i, e in enumerate(shown)
+                    if e.get("object_id") == ev.get("object_id") and e["kind"] == "relocated"]
+            if last:
+                shown.pop(last[-1])
+    return shown
+
+
 def plot_log(out_dir: Path, base: OccupancyGrid, grid_before: OccupancyGrid, mapper,
              t_static, t_gatmo, gt, *, scenario_json=None, run: int = 1) -> list[Path]:
     """Write the three pictures of one log; returns their paths."""
@@ -61,15 +76,14 @@ def plot_log(out_dir: Path, base: OccupancyGrid, grid_before: OccupancyGrid, map
                 label=tr.side)
         _zoom(ax, tr.poses_xytheta, gt_p)
         ax.legend(fontsize=7, loc="upper right")
-    for ev in t_gatmo.events:
-        if ev.get("kind") in ("relocated", "added") and ev.get("pose_new") is not None:
-            p1 = np.asarray(ev["pose_new"], dtype=float)
-            label = ev.get("label") or f"#{ev.get('object_id')}"
-            if ev.get("pose_old") is not None and ev["kind"] == "relocated":
-                p0 = np.asarray(ev["pose_old"], dtype=float)
-                axes[1].annotate("", xy=p1[:2], xytext=p0[:2],
-                                 arrowprops={"arrowstyle": "->", "color": "tab:orange", "lw": 1.5})
-            axes[1].text(p1[0], p1[1], f" {label}", fontsize=7, color="tab:orange")
+    for ev in shown_moves(t_gatmo.events):
+        p1 = np.asarray(ev["pose_new"], dtype=float)
+        label = ev.get("label") or f"#{ev.get('object_id')}"
+        if ev.get("pose_old") is not None and ev["kind"] == "relocated":
+            p0 = np.asarray(ev["pose_old"], dtype=float)
+            axes[1].annotate("", xy=p1[:2], xytext=p0[:2],
+                             arrowprops={"arrowstyle": "->", "color": "tab:orange", "lw": 1.5})
+        axes[1].text(p1[0], p1[1], f" {label}", fontsize=7, color="tab:orange")
     p = out_dir / "map.png"
     fig.savefig(p, dpi=110)
     plt.close(fig)

@@ -1597,3 +1597,99 @@ def test_a_gamma_object_longer_than_the_absent_box_is_not_it_with_match_extent_c
     assert (mt is not None) == fits, m.refusals
     if not fits:
         assert m.refusals.get((box.id, "gamma_extent"), 0) == 1
+
+
+def _two_boxes_one_chair(far_box, small_gone_from_start: bool, **cfg):
+    """(mapper, 0.5 m box, 0.45 m box, path): a room whose map has a 0.5 m box at
+    ``far_box`` (x0, y0) and a 0.45 m one at (3.0, 4.9); the world has neither, and a 0.5 m
+    box at (3.9, 4.3) turned 0.4 rad, nearer the small box's place than the large one's. The
+    extent test is on with a loose threshold, so that both boxes pass it there (this grid
+    world's surfaces lie half a cell past the map's cell centres); the small box is absent
+    from the run's start when ``small_gone_from_start``, the large one too otherwise."""
+    x0, y0 = far_box
+    g = room_grid(10, 6, 0.05, boxes=[(x0, y0, x0 + 0.5, y0 + 0.5), (3.0, 4.9, 3.45, 5.35)])
+    world = with_rotated_box(room_grid(10, 6, 0.05), (3.9, 4.3), 0.5, 0.5, 0.4)
+    cfg = CFG.model_copy(update={"match_extent_check": True, "match_extent_max_excess_m": 0.2,
+                                 **cfg})
+    m = GatmoMapper(ObjectMap.from_grid(g, cfg), g, cfg)
+    large, small = sorted([o for o in m.object_map.objects if not o.structure],
+                          key=lambda o: -len(o.shape_xy))
+    m.begin_run(1)
+    for o in (small,) if small_gone_from_start else (large, small):
+        m._mark_absent(o, 0.0, [])
+    path = [(x, 2.9, 0.0) for x in np.linspace(2.0, 5.0, 40)]
+    path += [(5.0, 2.9, th) for th in np.linspace(0, 2.6, 20)]
+    path += [(5.0 - 0.02 * k, 2.9 + 0.01 * k, 2.6) for k in range(40)]
+    return m, large, small, world, path
+
+
+@pytest.mark.parametrize("rank", [False, True])
+def test_a_box_seen_end_to_end_is_the_box_not_a_nearer_footstool_with_match_rank_extent(rank):
+    # both boxes absent; both fit the chair's blurred edges to the same 0.05 of score, and
+    # the small one stands nearer: nearness picks it. One scan at a time the chair's sides
+    # reach past the small box's outline (about 7 cm here) and hardly past the large one's
+    # (2 cm): ranked by that first, the large box is the one relocated
+    m, large, small, world, path = _two_boxes_one_chair((6.0, 2.0), False, match_rank_extent=rank)
+    events = _drive(m, world, path, max_range_m=6.0)
+    moved = [e.object_id for e in events if e.kind == "relocated"]
+    right = large if rank else small
+    assert moved == [right.id], (moved, m.extent_seen)
+    assert np.hypot(*(right.pose_xytheta[:2] - (3.9, 4.3))) < 0.1
+    assert (large.status, small.status) == (("M", "A") if rank else ("A", "M"))
+
+
+@pytest.mark.parametrize("reclaim", [False, True])
+def test_a_box_noticed_gone_after_its_chair_was_taken_reclaims_it_with_match_absence_reclaims(
+        reclaim):
+    # the small box is absent from the start, the large one stands in the map where the 3 m
+    # laser cannot see it: the chair at its new place matches the only absent candidate, the
+    # small box. Driving east, the large box's place is seen empty: with the option it takes
+    # the chair (it ranks above the small box there, as it would have, absent then), and the
+    # small box goes back to where it was, absent, its pose history saying so
+    m, large, small, world, path = _two_boxes_one_chair((8.0, 1.0), True,
+                                                         match_rank_extent=True,
+                                                         match_absence_reclaims=reclaim)
+    small_pose = small.pose_xytheta.copy()
+    path += [(4.2 + 0.05 * k, 3.3, 0.0) for k in range(60)]
+    events = _drive(m, world, path, max_range_m=3.0)
+    kinds = [(e.kind, e.object_id) for e in events]
+    assert kinds[:2] == [("relocated", small.id), ("absent", large.id)], kinds
+    if reclaim:
+        assert kinds[2:] == [("withdrawn", small.id), ("relocated", large.id)], kinds
+        assert np.hypot(*(large.pose_xytheta[:2] - (3.9, 4.3))) < 0.1
+        assert small.status == "A" and np.allclose(small.pose_xytheta, small_pose)
+        assert [h["status"] for h in small.history] == ["A", "M", "A"]
+        assert m.counts["withdrawn"] == 1
+    else:
+        assert kinds[2:] == [], kinds
+        assert (large.status, small.status) == ("A", "M")
+
+
+@pytest.mark.parametrize("no_return_hits", [False, True])
+def test_a_beam_with_no_return_is_no_evidence_that_an_object_stands_at_the_range_limit(
+        no_return_hits):
+    # a 0.5 m box whose near face is 3.9 m from a 4 m laser is gone; the wall behind it is out
+    # of range, so the beams through its place come back with no return (4.0 m). Those are
+    # 0.1 m from where the map expects the box: counted as ending on it (``no_return_hits``,
+    # the behaviour before the fix) they hold the box in the map however often the robot,
+    # driving on, sees through it (191 against 478 beams)
+    g = room_grid(14, 6, 0.05, boxes=[(5.9, 2.75, 6.4, 3.25)])
+    world = room_grid(14, 6, 0.05)
+    cfg = CFG.model_copy(update={"no_return_hits": no_return_hits})
+    m = GatmoMapper(ObjectMap.from_grid(g, cfg), g, cfg)
+    box = [o for o in m.object_map.objects if not o.structure][0]
+    m.begin_run(1)
+    events = []
+    path = [(2.0, 3.0, 0.0)] * 10 + [(2.0 + 0.05 * k, 3.0, 0.0) for k in range(30)]
+    for i, pose in enumerate(path):
+        s = make_scan(world, pose, n_beams=361, max_range_m=4.0, stamp_s=0.1 * i)
+        assert np.sum(s.ranges_m >= 4.0) > 100  # no returns beyond the range limit
+        if box.status == "U" and not no_return_hits:
+            assert m._hits.get(box.id, 0) == 0
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
+    kinds = [(e.kind, e.object_id) for e in events]
+    if no_return_hits:
+        assert kinds == [] and m._hits[box.id] > 100
+        assert m.absence_evidence(box.id)["core_seen"] == 1.0
+    else:
+        assert kinds == [("absent", box.id)]
