@@ -947,6 +947,9 @@ class GatmoMapper:
         through = ok & (r > expected + c.absence_beyond_m) & (own_deeper == own)
         on = ok & (np.abs(r - expected) <= c.hit_tolerance_m)
         if not c.no_return_hits:
+            # a beam with no return reads the range limit and ended on nothing: near the limit
+            # it used to count as ending on any object the map expected there, and a gone
+            # piece the robot drove towards collected such hits until it could not be absent
             on &= scan.valid
         # beyond absence_max_range_m a heading error of a degree moves a beam by more than a
         # small object's width: such beams are no evidence for or against an object
