@@ -1338,7 +1338,8 @@ class GatmoMapper:
             if fit is None:
                 continue
             held = self._match(view[0], prev, m.views)  # the holder on the chair as it is now
-            self._extends_beyond(prev, held, m.scan_points)  # (records its reach, for the key)
+            if self.cfg.match_extent_check or self.cfg.match_extent_record:
+                self._extent_verdict(prev, held, m.scan_points)  # its reach, for the key
             now = _rank_key(prev, held, key[0], key[1], self._rank_excess(prev, held))
             if fit[0][:4] > now[:4] and (best is None or fit[0] > best[0]):
                 best = (fit[0], i, fit[1])
@@ -1459,15 +1460,21 @@ class GatmoMapper:
     def _extends_beyond(self, o: MapObject, mt, scan_points: list) -> bool:
         """With ``match_extent_check``: what single scans saw of the chair reaches more than
         ``match_extent_max_excess_m`` beyond ``o`` placed at ``mt`` along one of its sides
-        (:func:`extent_excess`). With ``match_extent_record`` the verdict is kept in
+        (:meth:`_extent_verdict`). With ``match_extent_record`` the verdict is kept in
         :attr:`extent_seen` and nothing is refused."""
         if not (self.cfg.match_extent_check or self.cfg.match_extent_record):
             return False
+        ex = self._extent_verdict(o, mt, scan_points)
+        return (ex is not None and self.cfg.match_extent_check
+                and ex > self.cfg.match_extent_max_excess_m)
+
+    def _extent_verdict(self, o: MapObject, mt, scan_points: list) -> float | None:
+        """How far the chair's returns ``scan_points`` reach past ``o`` placed at ``mt``
+        (:func:`extent_excess`) [m], kept in :attr:`extent_seen`; None without returns."""
         ex = extent_excess(o, mt.pose_xytheta, scan_points, rect=self._field(o).rect)
-        if ex is None:
-            return False
-        self.extent_seen[self._extent_key(o, mt)] = ex
-        return self.cfg.match_extent_check and ex > self.cfg.match_extent_max_excess_m
+        if ex is not None:
+            self.extent_seen[self._extent_key(o, mt)] = ex
+        return ex
 
     def _beams_consistent(self, o: MapObject, mt, views: list) -> bool:
         """Beyond the paper: of the beams of the scans that saw the chair (``views``, as
