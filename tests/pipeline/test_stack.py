@@ -932,11 +932,12 @@ def _reloc_world(n=20, step_m=0.042):
     return grid, truth, scans
 
 
-def _run_stuck(offset, slip_at, relocalize, n, step_m=0.042, std_m=0.02):
+def _run_stuck(offset, slip_at, relocalize, n, step_m=0.042, std_m=0.02, min_expected=0):
     grid, truth, scans = _reloc_world(n, step_m)
     loc = StuckLocalizer(truth, offset, slip_at, std_m)
     stack = LocalizationStack(loc, None, _MapOnly(grid), FusionConfig(
-        relocalize=relocalize, use_scan_matcher=False))
+        relocalize=relocalize, use_scan_matcher=False,
+        relocalize_min_expected_beams=min_expected))
     stack.begin_run(1)
     out = [stack.step(s) for s in scans]
     err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out])[:, :2]
@@ -947,15 +948,19 @@ def _run_stuck(offset, slip_at, relocalize, n, step_m=0.042, std_m=0.02):
 @pytest.mark.parametrize("offset, fires", [((0.9, -0.6, 0.1), True), ((0.0, 0.0, 0.0), False),
                                            ((2.5, 0.0, 0.0), False)])
 @pytest.mark.parametrize("relocalize", [False, True])
+@pytest.mark.parametrize("min_expected", [0, 10])
 def test_a_filter_that_slid_onto_a_wrong_place_is_started_again_where_the_scan_fits(
-        offset, fires, relocalize):
+        offset, fires, relocalize, min_expected):
     """``relocalize``: at scan 10 the filter slides 1.1 m / 6 deg off and stays confident,
     explaining little of the scan. A correlative search within 1.5 m finds the true pose on
     every update, but a jump of 1.1 m is only made once the robot has travelled 0.8 m since
     the filter last fitted the map (0.3 m + 1.0 x travel): at scan 28 (19 scans of 4.2 cm),
     onto the truth, and GATMO then waits as after any jump. A filter on the right place is
-    never searched from; one 2.5 m off is beyond the window and stays where it is."""
-    loc, stack, out, err, truth = _run_stuck(offset, 10, relocalize, 40)
+    never searched from; one 2.5 m off is beyond the window and stays where it is. The same
+    with ``relocalize_min_expected_beams``: the map expects plenty of beams to end on its
+    boxes from the wrong place."""
+    loc, stack, out, err, truth = _run_stuck(offset, 10, relocalize, 40,
+                                             min_expected=min_expected)
     if relocalize and fires:
         assert loc.restarts == 1 and len(stack.relocalizations) == 1
         stamp, before, after = stack.relocalizations[0]
@@ -970,6 +975,37 @@ def test_a_filter_that_slid_onto_a_wrong_place_is_started_again_where_the_scan_f
         assert loc.restarts == 0 and stack.relocalizations == []
         assert not any(o.relocalized for o in out)
         np.testing.assert_allclose(err[10:], np.hypot(*offset[:2]), atol=1e-9)
+
+
+@pytest.mark.parametrize("min_expected", [0, 10])
+def test_a_pose_the_map_expects_to_see_nothing_from_is_not_searched_around(min_expected):
+    """``relocalize_min_expected_beams``: a U-shaped screen stands 0.6-1.3 m ahead of the
+    robot, and the map has it 1 m farther, beyond the laser's 1.4 m. The filter is right but
+    explains none of the scan; the search finds where the screen's returns fall on the map's
+    screen, 1 m ahead. Without the test the filter is started again there (the jump bound
+    widened to allow it); with it nothing is searched, as the map expects no beam to end on
+    anything from the filter's pose."""
+    screen = [(6.15, 4.4, 6.25, 5.6), (5.55, 5.5, 6.25, 5.6), (5.55, 4.4, 6.25, 4.5)]
+    world = room_grid(20, 10, 0.05, boxes=screen)
+    grid = room_grid(20, 10, 0.05, boxes=[(a + 1.0, b, c + 1.0, d) for a, b, c, d in screen])
+    n = 5
+    truth = np.stack([np.full(n, 5.0), 4.9 + 0.04 * np.arange(n), np.zeros(n)], axis=1)
+    scans = [make_scan(world, truth[i], n_beams=361, fov_rad=np.pi, max_range_m=1.4,
+                       odom_pose_xytheta=truth[i], stamp_s=0.1 * i) for i in range(n)]
+    loc = StuckLocalizer(truth, (0.0, 0.0, 0.0))
+    stack = LocalizationStack(loc, None, _MapOnly(grid), FusionConfig(
+        relocalize=True, use_scan_matcher=False, relocalize_max_jump_m=1.5,
+        relocalize_min_points=10, relocalize_min_expected_beams=min_expected))
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out])[:, :2]
+                     - truth[:, :2]).T)
+    if min_expected == 0:
+        assert loc.restarts == 1
+        k = [i for i, o in enumerate(out) if o.relocalized][0]
+        assert np.all(err[:k] < 1e-9) and np.all(err[k:] > 0.9)
+    else:
+        assert loc.restarts == 0 and np.all(err < 1e-9)
 
 
 def test_a_run_started_from_a_given_pose_is_not_moved_farther_than_it_travelled():
