@@ -226,11 +226,10 @@ class FusionConfig(GatmoModel):
     where the map expects to see (almost) nothing, explaining little of the scan is no sign of
     a wrong pose, and a search there lays those returns onto whatever the map has within the
     window (hall seed 410 run 2: a filter 0.2 m off with 0-8 beams expected to end, restarted
-    1 m off on a desk's and a lounge chair's returns laid onto two columns; 0.08 -> 0.50 m
-    ATE). The restarts that mend a lost filter came with 53-86 such beams (demo run 4, hall
-    seeds 305 runs 2 and 3, 318 run 4). At 10 (thirty-eighth session) hall seed 410 went
-    0.50 -> 0.08 m, and every other seed of 400-419, 100-109 and 300-319 stayed the same to
-    the digit.
+    1 m off on a desk's and a lounge chair's returns laid onto two columns). The restarts
+    that mend a lost filter came with 53-86 such beams (demo run 4, hall seeds 305 runs 2 and
+    3, 318 run 4). At 10 (thirty-eighth session) hall seed 410 went 0.50 -> 0.08 m ATE, and
+    every other seed of 400-419, 100-109 and 300-319 stayed the same to the digit.
 
     ``passes`` (1; offline, beyond the paper and AMCL): a log is run again, its localizer,
     alignment and relocalizer on the map the pass before ended with, fixed (the pieces that
@@ -1043,15 +1042,16 @@ class LocalizationStack:
 
     def _expects_enough(self, scan: Scan, loc_pose: np.ndarray) -> bool:
         """``relocalize_min_expected_beams``: whether the current map, ray-cast from the
-        filter's pose, expects that many of the scan's beams to end on something within the
-        laser's range (and so could show the pose wrong)."""
+        filter's pose, expects that many of the scan's beams to end on an occupied cell within
+        the laser's range (and so could show the pose wrong). Unknown cells hold nothing to
+        fit, so rays pass them."""
         f = self.fusion
         if f.relocalize_min_expected_beams <= 0:
             return True
         from gatmo.maps.raycast import cast_rays
 
         expected = cast_rays(self._map_grid(), compose(loc_pose, scan.laser_pose_xytheta),
-                             scan.angles_rad, scan.range_max_m)
+                             scan.angles_rad, scan.range_max_m, stop_at_unknown=False)
         return int(np.sum(expected < scan.range_max_m)) >= f.relocalize_min_expected_beams
 
     def _masked(self, scan: Scan) -> tuple[Scan, np.ndarray | None]:
