@@ -932,16 +932,23 @@ def _reloc_world(n=20, step_m=0.042):
     return grid, truth, scans
 
 
-def _run_stuck(offset, slip_at, relocalize, n, step_m=0.042, std_m=0.02, min_expected=0):
-    grid, truth, scans = _reloc_world(n, step_m)
-    loc = StuckLocalizer(truth, offset, slip_at, std_m)
-    stack = LocalizationStack(loc, None, _MapOnly(grid), FusionConfig(
-        relocalize=relocalize, use_scan_matcher=False,
-        relocalize_min_expected_beams=min_expected))
+def _run_on_map(loc, grid, scans, truth, **fusion):
+    """The stack (no scan matcher, ``fusion`` settings) over ``scans`` on the fixed map
+    ``grid``: (stack, steps, the localizer's position error per scan [m])."""
+    stack = LocalizationStack(loc, None, _MapOnly(grid),
+                              FusionConfig(use_scan_matcher=False, **fusion))
     stack.begin_run(1)
     out = [stack.step(s) for s in scans]
     err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out])[:, :2]
                      - truth[:, :2]).T)
+    return stack, out, err
+
+
+def _run_stuck(offset, slip_at, relocalize, n, step_m=0.042, std_m=0.02, min_expected=0):
+    grid, truth, scans = _reloc_world(n, step_m)
+    loc = StuckLocalizer(truth, offset, slip_at, std_m)
+    stack, out, err = _run_on_map(loc, grid, scans, truth, relocalize=relocalize,
+                                  relocalize_min_expected_beams=min_expected)
     return loc, stack, out, err, truth
 
 
@@ -993,13 +1000,9 @@ def test_a_pose_the_map_expects_to_see_nothing_from_is_not_searched_around(min_e
     scans = [make_scan(world, truth[i], n_beams=361, fov_rad=np.pi, max_range_m=1.4,
                        odom_pose_xytheta=truth[i], stamp_s=0.1 * i) for i in range(n)]
     loc = StuckLocalizer(truth, (0.0, 0.0, 0.0))
-    stack = LocalizationStack(loc, None, _MapOnly(grid), FusionConfig(
-        relocalize=True, use_scan_matcher=False, relocalize_max_jump_m=1.5,
-        relocalize_min_points=10, relocalize_min_expected_beams=min_expected))
-    stack.begin_run(1)
-    out = [stack.step(s) for s in scans]
-    err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out])[:, :2]
-                     - truth[:, :2]).T)
+    _, out, err = _run_on_map(loc, grid, scans, truth, relocalize=True,
+                              relocalize_max_jump_m=1.5, relocalize_min_points=10,
+                              relocalize_min_expected_beams=min_expected)
     if min_expected == 0:
         assert loc.restarts == 1
         k = [i for i, o in enumerate(out) if o.relocalized][0]
