@@ -54,7 +54,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
         stale0 = map_census(mapper.object_map, ties, doc, k + 1)["stale_ids"]
         seen0 = mapper.counts["seen_through_scans"]
         stack = LocalizationStack(
-            make_localizer(cfg, mapper.grid(), k, scans[0].gt_pose_xytheta, False),
+            make_localizer(cfg, mapper.localizer_grid(), k, scans[0].gt_pose_xytheta, False),
             make_matcher(cfg), mapper, cfg.fusion)
         stack.begin_run(k + 1)
         t0 = time.perf_counter()

@@ -11,6 +11,7 @@ Schema (version 1)::
                   "shape_cells_xy": [[x, y], ...],   # I_i, object frame [m]
                   "edge_xy": [[x, y], ...],          # E_i, object frame [m]
                   "seen_count": 120, "moved_count": 2,
+                  "unseen_runs": 0,  # runs since a return confirmed it (optional, 0)
                   "history": [{"run": 1, "stamp_s": 12.3, "pose": [...], "status": "A"}]}]}
                   # every pose in history with status U or M, and base_pose, is a prior
                   # for matching (gatmo.prior_earlier_poses)
@@ -57,6 +58,7 @@ def save_objects(path: str | Path, object_map: ObjectMap, *, base_grid_meta: dic
                 "edge_xy": [[_f(x), _f(y)] for x, y in o.edge_xy],
                 "seen_count": int(o.seen_count),
                 "moved_count": int(o.moved_count),
+                "unseen_runs": int(o.unseen_runs),
                 "history": o.history,
             }
             for o in object_map.objects
@@ -73,6 +75,13 @@ def _pose(v, path, where) -> np.ndarray:
     if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
         raise FormatError(f"expected [x, y, yaw], got {v!r}", file=path, field=where)
     return a
+
+
+def _count(v, path, where) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise FormatError(f"expected a count (an integer >= 0), got {v!r}", file=path,
+                          field=where)
+    return v
 
 
 def _points(v, path, where) -> np.ndarray:
@@ -148,6 +157,7 @@ def load_objects(path: str | Path) -> ObjectMap:
                 resolution_m=res,
                 seen_count=int(d.get("seen_count", 0)),
                 moved_count=int(d.get("moved_count", 0)),
+                unseen_runs=_count(d.get("unseen_runs", 0), path, f"{where}.unseen_runs"),
                 history=hist,
             )
         except KeyError as exc:

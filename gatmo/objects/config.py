@@ -243,6 +243,17 @@ class GatmoConfig(GatmoModel):
         "longer withheld as unexplained; GATMO's own map and the saved map do not change. A "
         "chair whose match waits (match_ambiguity_wait) or that joins Gamma still holds the "
         "filter where a wrong identity would have put the right outline")
+    withhold_unseen_runs: int | None = Field(
+        None, ge=1, description="beyond the paper: a placed movable object that no return "
+        "from a confirmed pose has landed on in this many runs (MapObject.unseen_runs) is left "
+        "out of the localizer's map, so a piece that may have left long ago does not pull the "
+        "filter; it stays in the object map, tested for absence as before, and goes back into "
+        "the localizer's map the moment a return from a confirmed pose lands on it or it is "
+        "placed by evidence. None: every placed object is in the localizer's map")
+    withhold_agreement: bool = Field(
+        True, description="with withhold_unseen_runs: the beams the map expects to end on a "
+        "withheld object are left out of the test of a scan's pose (min_agreement), as they "
+        "are out of the localizer's map; rays through them are still evidence of absence")
     provisional_min_verified_scans: int = Field(
         3, ge=1, description="scans of a track from confirmed poses before its outline is a "
         "provisional landmark")

@@ -155,8 +155,12 @@ class GatmoMapper:
         self._prov_near: np.ndarray | None = None  # cells within delta_W of such outlines
         self._run_open = False  # between begin_run and end_run
         self._prov_tick = 0  # scans GATMO took, for provisional_every_scans
+        # ids of placed objects left out of the localizer's map (withhold_unseen_runs)
+        self._withheld: set[int] = self._unseen_ids()
         self._reset_run_evidence()
         self._build_owner()
+        if self._withheld:
+            self._sync_localizer()
 
     @classmethod
     def from_config(cls, cfg: GatmoConfig, grid: OccupancyGrid,
@@ -167,6 +171,8 @@ class GatmoMapper:
 
     def _reset_run_evidence(self) -> None:
         self._seen: dict[int, set] = {}  # Alg. 1's I'_i (local cell indices)
+        # each object's history length at the run's start (longer: placed by evidence this run)
+        self._hist0 = {o.id: len(o.history) for o in self.object_map.objects}
         self._rays: dict[int, int] = {}
         self._through: dict[int, int] = {}  # beams passing well beyond the object
         self._hits: dict[int, int] = {}  # beams ending on it
@@ -206,6 +212,37 @@ class GatmoMapper:
     def grid(self) -> OccupancyGrid:
         """The reconfigured map (a copy)."""
         return self._grid.copy()
+
+    def localizer_grid(self) -> OccupancyGrid:
+        """The map the localizer is given (a copy): the reconfigured map without the objects
+        withheld (``withhold_unseen_runs``) and, while a run lasts, with the provisional
+        landmarks. A localizer made from it needs none of the queued region updates."""
+        g = self._grid.copy()
+        g.cells = self._loc_cells.copy()
+        return g
+
+    def _unseen_ids(self) -> set[int]:
+        """Placed movable objects unseen for ``withhold_unseen_runs`` runs."""
+        n = self.cfg.withhold_unseen_runs
+        if n is None:
+            return set()
+        return {o.id for o in self.object_map.placed()
+                if not o.structure and o.unseen_runs >= n}
+
+    def _withheld_idx(self) -> list[int]:
+        """Indices (into ``object_map.objects``) of the withheld objects not placed by
+        evidence this run."""
+        if not self._withheld:
+            return []
+        hist0 = getattr(self, "_hist0", {})
+        return [i for i, o in enumerate(self.object_map.objects)
+                if o.id in self._withheld and o.status in ("U", "M")
+                and len(o.history) == hist0.get(o.id, len(o.history))]
+
+    def _withheld_mask(self) -> np.ndarray | None:
+        """Cells (bool, the grid's shape) of :meth:`_withheld_idx`'s objects, or None."""
+        idx = self._withheld_idx()
+        return np.isin(self._owner, idx) if idx else None
 
     def pop_map_changes(self) -> list[tuple[np.ndarray, int, int]]:
         """Region updates (cells_new (h, w), ix0, iy0) since the last call."""
@@ -267,6 +304,9 @@ class GatmoMapper:
         """Queue region updates that bring the localizer's map to the reconfigured map plus
         the provisional landmarks (``provisional_landmarks``)."""
         target = self._grid.cells.copy()
+        gone = self._withheld_mask()
+        if gone is not None:
+            target[gone] = FREE
         prov = self._provisional_mask()
         if prov is not None:
             target[prov & (target == FREE)] = OCCUPIED
@@ -353,6 +393,10 @@ class GatmoMapper:
             events.append(Event(self._last_stamp, self.run, "added", o.id, o.label, None,
                                 o.pose_xytheta.tolist()))
             self.counts["added"] += 1
+        for o in self.object_map.placed():
+            seen = self._confirmed(o) or len(o.history) > self._hist0.get(o.id, 0)
+            o.unseen_runs = 0 if seen else o.unseen_runs + 1
+        self._withheld = self._unseen_ids()  # for the next run's localizer
         self._rerender()
         return events
 
@@ -845,6 +889,11 @@ class GatmoMapper:
             if o.id in self._seen:  # returns on the object: those cells are there
                 self._seen[o.id].difference_update(hit_loc[hit_own == i].tolist())
         touched = self._beam_evidence(beams)
+        back = {oid for oid in touched & self._withheld
+                if self._confirmed(self.object_map.by_id[oid])}
+        if back:  # seen standing there: back into the localizer's map
+            self._withheld -= back
+            self._sync_localizer()
         gone = []
         for oid in touched:
             o = self.object_map.by_id.get(oid)
@@ -974,6 +1023,11 @@ class GatmoMapper:
         keep = np.ones(len(own), dtype=bool)
         c = self.cfg
         in_view = gone = 0
+        if c.withhold_agreement:
+            # the objects the localizer is not given are not what its pose is tested on
+            out = np.isin(own, self._withheld_idx())
+            keep &= ~out
+            own = np.where(out, -1, own)
         for i in np.unique(own[own >= 0]):
             m = own == i
             t, h = int(through[m].sum()), int(on[m].sum())
@@ -985,7 +1039,7 @@ class GatmoMapper:
             # most of the furniture in view gone at once: the pose is wrong (a filter locked
             # onto a look-alike place 3.5 m off agreed on the columns and sent its beams
             # through every piece), not the room; the plain test decides
-            keep[:] = True
+            keep = own != -1 if c.withhold_agreement else np.ones(len(own), dtype=bool)
         return int((through & keep).sum() + (on & keep).sum()), int((on & keep).sum())
 
     def _beam_evidence(self, beams) -> set[int]:

@@ -28,6 +28,8 @@ class MapObject:
         edge_xy: (E, 2) edge cell centres E_i in the object frame [m].
         structure: walls and other large connected structure; never absent, never moved.
         history: list of {run, stamp_s, pose, status} in order.
+        unseen_runs: runs ended, while the object was placed, since a return from a confirmed
+            pose last landed on it or it was placed by evidence (withhold_unseen_runs).
     """
 
     id: int
@@ -42,6 +44,7 @@ class MapObject:
     seen_count: int = 0
     moved_count: int = 0
     history: list = field(default_factory=list)
+    unseen_runs: int = 0
 
     def cells_world(self, pose_xytheta: np.ndarray | None = None, dense: bool = False):
         """Shape points (K, 2) in the map frame (at ``pose_xytheta``, default the current

@@ -172,7 +172,7 @@ def make_full_stack(cfg, mapper, seed: int, initial_pose,
     """The full stack: the localizer on GATMO's current map, or on ``loc_grid`` fixed if given
     (global localization when ``initial_pose`` is None), the scan matcher if
     ``cfg.fusion.use_scan_matcher``, GATMO."""
-    grid = loc_grid if loc_grid is not None else mapper.grid()
+    grid = loc_grid if loc_grid is not None else mapper.localizer_grid()
     return LocalizationStack(
         make_localizer(cfg, grid, seed, initial_pose, initial_pose is None),
         make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,

@@ -7,6 +7,7 @@ import pytest
 
 from gatmo.errors import FormatError
 from gatmo.geometry import transform_points
+from gatmo.maps.grid import OCCUPIED
 from gatmo.maps.object_io import load_objects, save_objects
 from gatmo.objects import GatmoConfig, GatmoMapper, ObjectMap
 from gatmo.objects.matching import match_points
@@ -426,6 +427,12 @@ def test_objects_json_round_trip_and_errors(tmp_path):
     with pytest.raises(FormatError) as e:
         load_objects(tmp_path / "hist.json")
     assert e.value.field == "objects[1].history[0].pose"
+    doc = json.loads((tmp_path / "o.json").read_text())
+    doc["objects"][1]["unseen_runs"] = -1
+    (tmp_path / "unseen.json").write_text(json.dumps(doc))
+    with pytest.raises(FormatError) as e:
+        load_objects(tmp_path / "unseen.json")
+    assert e.value.field == "objects[1].unseen_runs"
 
 
 def test_end_to_end_moved_box_is_relocated_with_its_id():
@@ -1693,3 +1700,60 @@ def test_a_beam_with_no_return_is_no_evidence_that_an_object_stands_at_the_range
         assert m.absence_evidence(box.id)["core_seen"] == 1.0
     else:
         assert kinds == [("absent", box.id)]
+
+
+@pytest.mark.parametrize("withhold", [None, 2])
+def test_an_object_unseen_for_runs_leaves_the_localizers_map_until_seen_again(withhold,
+                                                                               tmp_path):
+    # a box no return has landed on in two runs (the robot went elsewhere) is left out of the
+    # map the localizer is given, not out of the object map; scans that see it standing put it
+    # back at once, and its count of unseen runs starts again
+    m, box, world = _one_object((10, 6), (1.0, 2.5, 1.5, 3.0), [(1.0, 2.5, 1.5, 3.0)],
+                                withhold_unseen_runs=withhold)
+    cell = m.grid().world_to_cell(np.array([[1.25, 2.75]]))[0]
+
+    def in_localizer_map() -> bool:
+        return bool(m.localizer_grid().occupied[cell[1], cell[0]])
+
+    m.end_run()
+    m.begin_run(2)
+    m.end_run()
+    assert box.unseen_runs == 2 and box.status == "U"
+    assert m.grid().occupied[cell[1], cell[0]]  # the object map still has it
+    assert in_localizer_map() == (withhold is None)
+    # the count and the withholding survive objects.json
+    save_objects(tmp_path / "o.json", m.object_map)
+    again = GatmoMapper(load_objects(tmp_path / "o.json"), m.base, m.cfg)
+    assert bool(again.localizer_grid().occupied[cell[1], cell[0]]) == (withhold is None)
+    m.pop_map_changes()
+    m.begin_run(3)
+    _drive(m, world, [(4.0, y, np.pi) for y in np.linspace(2.4, 3.1, 10)], max_range_m=6.0,
+           n_beams=181)
+    assert in_localizer_map()
+    if withhold is not None:  # the localizer was handed the region with the box in it
+        changes = m.pop_map_changes()
+        assert any(cells.shape[0] > cell[1] - iy0 >= 0 and cells.shape[1] > cell[0] - ix0 >= 0
+                   and cells[cell[1] - iy0, cell[0] - ix0] == OCCUPIED
+                   for cells, ix0, iy0 in changes)
+    m.end_run()
+    assert box.unseen_runs == 0 and in_localizer_map()
+
+
+@pytest.mark.parametrize("agreement, skipped", [(False, True), (True, False)])
+def test_objects_out_of_the_localizers_map_are_out_of_the_pose_test(agreement, skipped):
+    # the three pieces of the test above are gone, two of them unseen for two runs and so out
+    # of the localizer's map (withhold_unseen_runs). The pose test leaves their beams out
+    # too: the one piece left is seen through alone, the walls agree, and the scans are
+    # evidence that all three are gone
+    boxes = [(4.5, 1.2, 5.0, 2.2), (4.5, 2.6, 5.0, 3.4), (4.5, 3.8, 5.0, 4.8)]
+    grid = room_grid(10, 6, 0.05, boxes=boxes)
+    cfg = CFG.model_copy(update={"withhold_unseen_runs": 2, "withhold_agreement": agreement})
+    om = ObjectMap.from_grid(grid, cfg)
+    pieces = sorted((o for o in om.objects if not o.structure), key=lambda o: o.pose_xytheta[1])
+    pieces[0].unseen_runs = pieces[2].unseen_runs = 2
+    m = GatmoMapper(om, grid, cfg)
+    m.begin_run(1)
+    for s in _scans_facing_east(room_grid(10, 6, 0.05), fov_rad=np.radians(120)):
+        m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=s.stamp_s)
+    assert (m.counts["skipped_disagreement"] == 12) == skipped
+    assert [o.status for o in pieces] == (["U"] * 3 if skipped else ["A"] * 3)
