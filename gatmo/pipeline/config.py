@@ -83,7 +83,7 @@ def sim_stack_config():
     cfg.gatmo.match_extent_check = True
     # a piece no return has confirmed in two runs is left out of the localizer's map (and of
     # GATMO's pose test) until seen again: a third of the simulator's pieces move before every
-    # run (docs/history.md, "Pieces unseen for runs"): hall seeds 100-109 ATE 0.132 -> 0.102 m,
+    # run (docs/experiments.md, thirty-ninth session): hall seeds 100-109 ATE 0.132 -> 0.102 m,
     # 400-419 the same; the 50-run soak's time lost over runs 11-50 lower on four chains of
     # five. A run on a fresh map withholds nothing, so the real logs' figures are the same
     cfg.gatmo.withhold_unseen_runs = 2
