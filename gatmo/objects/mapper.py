@@ -234,10 +234,9 @@ class GatmoMapper:
         evidence this run."""
         if not self._withheld:
             return []
-        hist0 = getattr(self, "_hist0", {})
         return [i for i, o in enumerate(self.object_map.objects)
                 if o.id in self._withheld and o.status in ("U", "M")
-                and len(o.history) == hist0.get(o.id, len(o.history))]
+                and len(o.history) == self._hist0.get(o.id, len(o.history))]
 
     def _withheld_mask(self) -> np.ndarray | None:
         """Cells (bool, the grid's shape) of :meth:`_withheld_idx`'s objects, or None."""
@@ -1020,14 +1019,13 @@ class GatmoMapper:
         seeds 101 and 103, true poses against poses 0.2 m off: this test at 0.85 skips
         0-25 % / 59-78 %, the plain fraction at 0.75 skipped 7-52 % / 48-64 %."""
         own, _, through, on = beams[:4]
-        keep = np.ones(len(own), dtype=bool)
         c = self.cfg
         in_view = gone = 0
-        if c.withhold_agreement:
-            # the objects the localizer is not given are not what its pose is tested on
-            out = np.isin(own, self._withheld_idx())
-            keep &= ~out
-            own = np.where(out, -1, own)
+        # the objects the localizer is not given are not what its pose is tested on
+        out = (np.isin(own, self._withheld_idx()) if c.withhold_agreement
+               else np.zeros(len(own), dtype=bool))
+        keep = ~out
+        own = np.where(out, -1, own)
         for i in np.unique(own[own >= 0]):
             m = own == i
             t, h = int(through[m].sum()), int(on[m].sum())
@@ -1039,7 +1037,7 @@ class GatmoMapper:
             # most of the furniture in view gone at once: the pose is wrong (a filter locked
             # onto a look-alike place 3.5 m off agreed on the columns and sent its beams
             # through every piece), not the room; the plain test decides
-            keep = own != -1 if c.withhold_agreement else np.ones(len(own), dtype=bool)
+            keep = ~out
         return int((through & keep).sum() + (on & keep).sum()), int((on & keep).sum())
 
     def _beam_evidence(self, beams) -> set[int]:
