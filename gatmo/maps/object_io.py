@@ -11,7 +11,7 @@ Schema (version 1)::
                   "shape_cells_xy": [[x, y], ...],   # I_i, object frame [m]
                   "edge_xy": [[x, y], ...],          # E_i, object frame [m]
                   "seen_count": 120, "moved_count": 2,
-                  "unseen_runs": 0,  # runs since a return confirmed it (optional, 0)
+                  "unseen_runs": 0,  # runs since seen standing (optional, 0)
                   "history": [{"run": 1, "stamp_s": 12.3, "pose": [...], "status": "A"}]}]}
                   # every pose in history with status U or M, and base_pose, is a prior
                   # for matching (gatmo.prior_earlier_poses)

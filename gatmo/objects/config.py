@@ -244,12 +244,13 @@ class GatmoConfig(GatmoModel):
         "chair whose match waits (match_ambiguity_wait) or that joins Gamma still holds the "
         "filter where a wrong identity would have put the right outline")
     withhold_unseen_runs: int | None = Field(
-        None, ge=1, description="beyond the paper: a placed movable object that no return "
-        "from a confirmed pose has landed on in this many runs (MapObject.unseen_runs) is left "
+        None, ge=1, description="beyond the paper: a placed movable object not seen standing "
+        "in this many runs (MapObject.unseen_runs; seen standing: confirm_min_beams beams from "
+        "confirmed poses ending on it and not in doubt, or placed by a match or an add) is left "
         "out of the localizer's map, so a piece that may have left long ago does not pull the "
         "filter; it stays in the object map, tested for absence as before, and goes back into "
-        "the localizer's map the moment a return from a confirmed pose lands on it or it is "
-        "placed by evidence. None: every placed object is in the localizer's map")
+        "the localizer's map on the scan that sees it standing. None: every placed object is "
+        "in the localizer's map")
     withhold_agreement: bool = Field(
         True, description="with withhold_unseen_runs: the beams the map expects to end on a "
         "withheld object are left out of the test of a scan's pose (min_agreement), as they "

@@ -28,8 +28,9 @@ class MapObject:
         edge_xy: (E, 2) edge cell centres E_i in the object frame [m].
         structure: walls and other large connected structure; never absent, never moved.
         history: list of {run, stamp_s, pose, status} in order.
-        unseen_runs: runs ended, while the object was placed, since a return from a confirmed
-            pose last landed on it or it was placed by evidence (withhold_unseen_runs).
+        unseen_runs: runs ended, while the object was placed, since it was last seen standing
+            (enough beams from confirmed poses ending on it) or placed by evidence
+            (withhold_unseen_runs).
     """
 
     id: int
