@@ -615,6 +615,22 @@ class GatmoMapper:
         out[ok] = self._owned_by_doubted(owner) & (self._near_dist[cy, cx] <= self.cfg.delta_W_m)
         return out
 
+    def withheld_at(self, points_xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: map-frame points (N, 2) within delta_W of an object left out of the
+        localizer's map (``withhold_unseen_runs``): if it still stands, the localizer's map
+        has nothing there to explain them. Beyond the paper."""
+        out = np.zeros(len(points_xy), dtype=bool)
+        idx = self._withheld_idx()
+        if not idx:
+            return out
+        g = self._grid
+        c = g.world_to_cell(np.asarray(points_xy, dtype=float).reshape(-1, 2))
+        ok = g.in_bounds(c)
+        cy, cx = c[ok, 1], c[ok, 0]
+        out[ok] = (np.isin(self._near_owner[cy, cx], idx)
+                   & (self._near_dist[cy, cx] <= self.cfg.delta_W_m))
+        return out
+
     def offset_at(self, points_xy: np.ndarray) -> np.ndarray:
         """(N,) bool: the returns of one scan, placed in the map frame (N, 2) from a predicted
         pose, that belong to an object whose returns miss it by a consistent offset: at least

@@ -1721,6 +1721,10 @@ def test_an_object_unseen_for_runs_leaves_the_localizers_map_until_seen_again(wi
     assert box.unseen_runs == 2 and box.status == "U"
     assert m.grid().occupied[cell[1], cell[0]]  # the object map still has it
     assert in_localizer_map() == (withhold is None)
+    # returns on the box (its face, 2 cm off) are ones the localizer's map cannot explain
+    # (fusion.mask_withheld); a wall's are not
+    face = np.array([[1.52, 2.75], [1.25, 3.02], [5.0, 0.02]])
+    assert m.withheld_at(face).tolist() == [withhold is not None] * 2 + [False]
     # the count and the withholding survive objects.json
     save_objects(tmp_path / "o.json", m.object_map)
     again = GatmoMapper(load_objects(tmp_path / "o.json"), m.base, m.cfg)
@@ -1735,6 +1739,7 @@ def test_an_object_unseen_for_runs_leaves_the_localizers_map_until_seen_again(wi
         assert any(cells.shape[0] > cell[1] - iy0 >= 0 and cells.shape[1] > cell[0] - ix0 >= 0
                    and cells[cell[1] - iy0, cell[0] - ix0] == OCCUPIED
                    for cells, ix0, iy0 in changes)
+    assert not m.withheld_at(face).any()
     m.end_run()
     assert box.unseen_runs == 0 and in_localizer_map()
 

@@ -348,13 +348,14 @@ class RecordingLocalizer(ScriptedLocalizer):
         return super().update(odom, scan)
 
 
-def _what_the_localizer_got(loc, grid, fusion, truth, scans):
-    """Runs the stack (``loc``, no matcher, GATMO on ``grid``) over ``scans`` taken at
-    ``truth``: (the stack, per scan its endpoints (B, 2) placed from the true pose and the
-    ranges the localizer was handed (B,))."""
+def _what_the_localizer_got(loc, grid, fusion, truth, scans, mapper=None):
+    """Runs the stack (``loc``, no matcher, GATMO on ``grid`` or ``mapper``) over ``scans``
+    taken at ``truth``: (the stack, per scan its endpoints (B, 2) placed from the true pose
+    and the ranges the localizer was handed (B,))."""
     from gatmo.objects import GatmoConfig, GatmoMapper
 
-    stack = LocalizationStack(loc, None, GatmoMapper.from_config(GatmoConfig(), grid), fusion)
+    mapper = mapper or GatmoMapper.from_config(GatmoConfig(), grid)
+    stack = LocalizationStack(loc, None, mapper, fusion)
     stack.begin_run(1)
     for s in scans:
         stack.step(s)
@@ -451,6 +452,42 @@ def test_returns_near_a_doubted_object_are_withheld_with_mask_doubted():
         masked[flag] = stack.n_masked
     # the box is relocated within a few scans, ending the doubt: a handful of returns more
     assert masked[True] > masked[False]
+
+
+@pytest.mark.parametrize("flag, confident", [(False, False), (True, False), (True, True)])
+def test_returns_of_a_withheld_piece_still_standing_are_withheld_with_mask_withheld(
+        flag, confident):
+    """A box left out of the localizer's map (unseen for two runs, ``withhold_unseen_runs``)
+    that still stands: with ``mask_withheld`` its returns reach the localizer as NaN (the
+    localizer's map has nothing there to explain them) on every scan after the first (the
+    stack places a scan from the last pose) while the filter is too broad for GATMO to see
+    the box standing; a confident filter's first scan shows GATMO the box standing, it goes
+    back into the localizer's map, and nothing is withheld; the walls' returns never."""
+    from gatmo.objects import GatmoConfig, GatmoMapper, ObjectMap
+
+    box = (4.0, 2.2, 4.4, 2.6)
+    grid = room_grid(8, 5, 0.05, boxes=[box])
+    cfg = GatmoConfig(withhold_unseen_runs=2)
+    om = ObjectMap.from_grid(grid, cfg)
+    for o in om.objects:
+        o.unseen_runs = 0 if o.structure else 2
+    mapper = GatmoMapper(om, grid, cfg)
+    truth = np.array([[1.5 + 0.02 * i, 2.4, 0.0] for i in range(12)])
+    scans = [make_scan(grid, p, n_beams=181, max_range_m=6.0, odom_pose_xytheta=p,
+                       stamp_s=0.1 * i) for i, p in enumerate(truth)]
+    loc = RecordingLocalizer(truth)
+    if not confident:
+        loc.confident_at = set()
+    _, got = _what_the_localizer_got(loc, grid, FusionConfig(align_to_map=False,
+                                                             mask_withheld=flag),
+                                     truth, scans, mapper=mapper)
+    for k, (ends, seen) in enumerate(got):
+        on_box = (np.abs(ends[:, 0] - 4.2) < 0.25) & (np.abs(ends[:, 1] - 2.4) < 0.25)
+        assert on_box.sum() >= 8
+        assert not np.isnan(seen[~on_box]).any()  # walls: never withheld
+        expect = flag and not confident and k > 0
+        assert np.isnan(seen[on_box]).all() == expect, k
+        assert not np.isnan(seen[on_box]).any() or expect, k
 
 
 def test_gatmo_is_told_which_poses_the_alignment_confirmed():
