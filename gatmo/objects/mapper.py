@@ -604,31 +604,28 @@ class GatmoMapper:
         """(N,) bool: map-frame points (N, 2) within delta_W of an object in doubt (beams
         passed through part of it this run: it may have been shifted, and returns near its
         old place would pull a localizer towards it). Beyond the paper."""
-        out = np.zeros(len(points_xy), dtype=bool)
         if not self._doubt:
-            return out
-        g = self._grid
-        c = g.world_to_cell(np.asarray(points_xy, dtype=float).reshape(-1, 2))
-        ok = g.in_bounds(c)
-        cy, cx = c[ok, 1], c[ok, 0]
-        owner = self._near_owner[cy, cx]
-        out[ok] = self._owned_by_doubted(owner) & (self._near_dist[cy, cx] <= self.cfg.delta_W_m)
-        return out
+            return np.zeros(len(points_xy), dtype=bool)
+        return self._near_objects_at(points_xy, self._owned_by_doubted)
 
     def withheld_at(self, points_xy: np.ndarray) -> np.ndarray:
         """(N,) bool: map-frame points (N, 2) within delta_W of an object left out of the
         localizer's map (``withhold_unseen_runs``): if it still stands, the localizer's map
         has nothing there to explain them. Beyond the paper."""
-        out = np.zeros(len(points_xy), dtype=bool)
         idx = self._withheld_idx()
         if not idx:
-            return out
+            return np.zeros(len(points_xy), dtype=bool)
+        return self._near_objects_at(points_xy, lambda owner: np.isin(owner, idx))
+
+    def _near_objects_at(self, points_xy: np.ndarray, picked) -> np.ndarray:
+        """(N,) bool: map-frame points (N, 2) within delta_W of a map cell whose object
+        ``picked`` (object indices (M,), < 0 for none -> (M,) bool) picks."""
+        out = np.zeros(len(points_xy), dtype=bool)
         g = self._grid
         c = g.world_to_cell(np.asarray(points_xy, dtype=float).reshape(-1, 2))
         ok = g.in_bounds(c)
         cy, cx = c[ok, 1], c[ok, 0]
-        out[ok] = (np.isin(self._near_owner[cy, cx], idx)
-                   & (self._near_dist[cy, cx] <= self.cfg.delta_W_m))
+        out[ok] = picked(self._near_owner[cy, cx]) & (self._near_dist[cy, cx] <= self.cfg.delta_W_m)
         return out
 
     def offset_at(self, points_xy: np.ndarray) -> np.ndarray:

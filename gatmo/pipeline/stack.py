@@ -105,11 +105,11 @@ class FusionConfig(GatmoModel):
     returns next to its old place and pulls the filter there. Measured on hall seeds 300-309:
     time lost 5.7 % -> 5.1 %, moved pieces found 12.0 % -> 11.4 %, false relocations 0.70 ->
     0.82 per run; off until more seeds separate it from the seed-to-seed swing.
-    ``mask_withheld`` (off; needs ``mask_unexplained``) also withholds returns within delta_W
-    of an object left out of the localizer's map (``gatmo.withhold_unseen_runs``): where such
-    a piece still stands, its returns would land far from anything in the localizer's map
-    and pull the filter to wherever they fall near something; where it has gone, beams pass
-    its place and nothing is withheld.
+    ``mask_withheld`` (off; on in ``sim_stack_config``; needs ``mask_unexplained``) also
+    withholds returns within delta_W of an object left out of the localizer's map
+    (``gatmo.withhold_unseen_runs``): where such a piece still stands, its returns would land
+    far from anything in the localizer's map and pull the filter to wherever they fall near
+    something; where it has gone, beams pass its place and nothing is withheld.
     ``mask_offset_objects`` (on; needs ``mask_unexplained``) withholds, scan by scan, the
     returns of an object that all miss it by a consistent offset while the rest of the scan
     fits the map (:meth:`gatmo.objects.mapper.GatmoMapper.offset_at`, placed from the pose
