@@ -236,7 +236,11 @@ class GatmoMapper:
             return []
         return [i for i, o in enumerate(self.object_map.objects)
                 if o.id in self._withheld and o.status in ("U", "M")
-                and len(o.history) == self._hist0.get(o.id, len(o.history))]
+                and not self._placed_this_run(o)]
+
+    def _placed_this_run(self, o: MapObject) -> bool:
+        """``o`` was placed by evidence this run (a match or an add: its history grew)."""
+        return len(o.history) > self._hist0.get(o.id, 0)
 
     def _withheld_mask(self) -> np.ndarray | None:
         """Cells (bool, the grid's shape) of :meth:`_withheld_idx`'s objects, or None."""
@@ -393,7 +397,7 @@ class GatmoMapper:
                                 o.pose_xytheta.tolist()))
             self.counts["added"] += 1
         for o in self.object_map.placed():
-            seen = self._confirmed(o) or len(o.history) > self._hist0.get(o.id, 0)
+            seen = self._confirmed(o) or self._placed_this_run(o)
             o.unseen_runs = 0 if seen else o.unseen_runs + 1
         self._withheld = self._unseen_ids()  # for the next run's localizer
         self._rerender()
