@@ -155,8 +155,8 @@ def load_objects(path: str | Path) -> ObjectMap:
                 structure=bool(d.get("structure", False)),
                 base_pose_xytheta=None if bp is None else _pose(bp, path, f"{where}.base_pose"),
                 resolution_m=res,
-                seen_count=int(d.get("seen_count", 0)),
-                moved_count=int(d.get("moved_count", 0)),
+                seen_count=_count(d.get("seen_count", 0), path, f"{where}.seen_count"),
+                moved_count=_count(d.get("moved_count", 0), path, f"{where}.moved_count"),
                 unseen_runs=_count(d.get("unseen_runs", 0), path, f"{where}.unseen_runs"),
                 history=hist,
             )

@@ -427,12 +427,15 @@ def test_objects_json_round_trip_and_errors(tmp_path):
     with pytest.raises(FormatError) as e:
         load_objects(tmp_path / "hist.json")
     assert e.value.field == "objects[1].history[0].pose"
-    doc = json.loads((tmp_path / "o.json").read_text())
-    doc["objects"][1]["unseen_runs"] = -1
-    (tmp_path / "unseen.json").write_text(json.dumps(doc))
-    with pytest.raises(FormatError) as e:
-        load_objects(tmp_path / "unseen.json")
-    assert e.value.field == "objects[1].unseen_runs"
+    # the counts are integers >= 0: no negative, fraction, string or boolean
+    for field, bad in [("unseen_runs", -1), ("seen_count", -3), ("seen_count", 2.5),
+                       ("moved_count", "2"), ("moved_count", True)]:
+        doc = json.loads((tmp_path / "o.json").read_text())
+        doc["objects"][1][field] = bad
+        (tmp_path / "count.json").write_text(json.dumps(doc))
+        with pytest.raises(FormatError) as e:
+            load_objects(tmp_path / "count.json")
+        assert e.value.field == f"objects[1].{field}", (field, bad)
 
 
 def test_end_to_end_moved_box_is_relocated_with_its_id():
