@@ -69,6 +69,17 @@ class GatmoConfig(GatmoModel):
         0.5, ge=0, le=1, description="of the objects in view, at most this many (or one) may be "
         "left out; more gone at once means a wrong pose")
     agreement_min_beams: int = Field(20, ge=1, description="fewer: the scan is skipped")
+    unexplained_sparse_min_beams: int | None = Field(
+        None, ge=1, description="beyond the paper: a scan skipped for too few beams the map "
+        "expects to end on something (fewer than agreement_min_beams, at least this many) whose "
+        "expected beams agree (min_agreement) still counts its unexplained returns for the "
+        "localizer's mask (fusion.mask_unexplained), and is no other evidence: in a sparse view "
+        "a piece moved since the map was made pulls the filter onto its old place (hall seed "
+        "403 run 3, replayed: ATE 0.30 -> 0.17 m). None (the default): such scans count "
+        "nothing. At 5, halls 400-419 ATE 0.117 -> 0.168 m (two seeds lost that were not) and "
+        "0.151 -> 0.142 m with filter draw 10 (lower on 14 of 20), 100-109 0.102 -> 0.101 m "
+        "with 0.3 more false relocations per seed: no better than the filter's chaos "
+        "(docs/experiments.md, forty-first session)")
     min_explained_fraction: float = Field(0.3, ge=0, le=1,
                                           description="returns the map explains, else skip")
     # unexplained returns

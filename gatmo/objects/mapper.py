@@ -140,13 +140,14 @@ class GatmoMapper:
         self._cores: dict[int, set] = {}
         self.counts = {"absent": 0, "relocated": 0, "restored": 0, "added": 0, "movable": 0,
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
-                       "skipped_disagreement": 0, "absence_vetoed": 0,
+                       "skipped_disagreement": 0, "unexplained_sparse": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
                        "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0,
                        "absent_to_gamma": 0, "settle_refused": 0, "ambiguous_refused": 0,
                        "withdrawn": 0}
         self._ms: list[float] = []
         self._beams = None
+        self._sparse_agrees = False  # the last pose test: too few beams, those agreeing
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
         self._view: tuple | None = None  # the scan being tracked (Metaobject.views)
         # what the localizer was last given: the reconfigured map plus, with
@@ -488,6 +489,11 @@ class GatmoMapper:
         fit = self._fits_map(lp, scan, pts, near_any)
         if isinstance(fit, str):
             self.counts[fit] += 1
+            if fit == "skipped_disagreement" and self._sparse_agrees:
+                # beyond the paper: no evidence of absence or presence from a pose the map
+                # cannot test, but the localizer's mask learns where the unexplained returns are
+                self.counts["unexplained_sparse"] += 1
+                self._count_unexplained(pts[~explained])
             self._expire(stamp_s, events)
             return events
         self._count_near_returns(pts, lp)
@@ -548,6 +554,10 @@ class GatmoMapper:
             return "skipped_poor_fit"
         self._beams = self._classify_beams(lp, scan)
         n, on = self._agreement(self._beams)
+        # too little in view that the map expects to test the pose on, and what is there agrees
+        k = self.cfg.unexplained_sparse_min_beams
+        self._sparse_agrees = (k is not None and k <= n < self.cfg.agreement_min_beams
+                               and on >= self.cfg.min_agreement * n)
         if n < self.cfg.agreement_min_beams or on < self.cfg.min_agreement * n:
             # beyond the paper: too little of what the map expects (walls, columns, furniture
             # that stayed) is where this pose says; a wrong pose sees through small objects

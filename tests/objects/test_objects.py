@@ -1380,6 +1380,37 @@ def test_note_unexplained_counts_returns_and_nothing_else():
     assert m.absence_evidence(col.id)["beams_through"] == 0
 
 
+@pytest.mark.parametrize("min_beams, pose_dy_m, counted", [
+    (None, 0.0, False), (5, 0.0, True), (5, 0.1, False), (12, 0.0, False)],
+    ids=["off", "on", "on, pose off", "on, too few beams"])
+def test_a_sparse_view_that_agrees_counts_its_unexplained_returns(min_beams, pose_dy_m, counted):
+    """A view in which the map expects only a column's 10 beams to end on something (fewer than
+    agreement_min_beams) is too little to test the pose on, and GATMO skips it. With
+    unexplained_sparse_min_beams, a scan whose expected beams agree still counts where its
+    returns are unexplained (an unmapped box), for the localizer's mask, and feeds nothing
+    else: no track, no evidence about the column. A pose 0.1 m off sends 3 of the column's
+    beams past it and counts nothing; neither does a view with fewer expected beams than
+    asked (10 end on the column)."""
+    column = (8.0, 6.0, 8.3, 6.3)
+    grid = room_grid(14, 12, 0.05, boxes=[column])  # the walls beyond the 4 m laser's reach
+    world = room_grid(14, 12, 0.05, boxes=[column, (8.0, 3.8, 8.4, 4.2)])  # and a box unmapped
+    pose = np.array([6.0, 5.0, 0.0])
+    scan = make_scan(world, pose, n_beams=181, max_range_m=4.0)
+    m = GatmoMapper.from_config(GatmoConfig(unexplained_sparse_min_beams=min_beams), grid)
+    m.begin_run(1)
+    laid = pose + [0.0, pose_dy_m, 0.0]
+    for k in range(2):
+        m.update(laid, scan, pose_confident=True, stamp_s=0.1 * k, pose_verified=True)
+    assert m.counts["skipped_disagreement"] == 2  # the scan is no evidence either way
+    assert m.counts["unexplained_sparse"] == (2 if counted else 0)
+    box_face = np.array([[8.0, 4.0]]) + [0.0, pose_dy_m]
+    assert m.unexplained_at(box_face)[0] == counted
+    assert not m.unexplained_at(np.array([[7.0, 5.0]]))[0]  # free space no return landed in
+    assert m._meta == []
+    (col,) = [o for o in m.object_map.objects if o.status == "U" and not o.structure]
+    assert m.absence_evidence(col.id)["beams_through"] == 0
+
+
 def _corner_gamma(m, corner_xy, leg_m):
     """A Gamma object seen this run: the two legs (``leg_m`` each) of a square's corner at
     ``corner_xy``, as a track's chair cells leave it when the robot saw one corner only."""
