@@ -235,14 +235,6 @@ class GatmoConfig(GatmoModel):
         0.15, ge=0, description="a match whose footprint moves less (mean cell distance) is "
         "no shift: pose jitter of a few cm smears the returns by as much")
     nudge_max_shift_m: float = Field(1.0, gt=0, description="farther: not a shift")
-    nudge_pose_margin: float | None = Field(
-        None, gt=0, le=1, description="beyond the paper: a nudge is refused when the pose could "
-        "explain it: the scans' other returns near the map, laid from each laser pose moved by "
-        "the inverse of the nudge's motion (where the laser stood if the object had stayed and "
-        "the pose were off), fit the map (within offset_fit_m) no worse than this fraction "
-        "below how they fit from the poses given, or fewer than 4 offset_min_returns of them "
-        "are there to tell. A pose off along a wall (the wall fits either way) makes the one "
-        "piece in view look shifted. None: no such test")
     offset_min_returns: int = Field(
         4, ge=1, description="GatmoMapper.offset_at: returns an object needs in a scan before "
         "they can be said to miss it")

@@ -29,7 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from gatmo.datasets.types import Scan
-from gatmo.geometry import compose, inverse, transform_points, wrap_angle
+from gatmo.geometry import compose, inverse, transform_points
 from gatmo.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
@@ -144,7 +144,7 @@ class GatmoMapper:
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
                        "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0,
                        "absent_to_gamma": 0, "settle_refused": 0, "ambiguous_refused": 0,
-                       "withdrawn": 0, "nudge_pose_refused": 0}
+                       "withdrawn": 0}
         self._ms: list[float] = []
         self._beams = None
         self._sparse_agrees = False  # the last pose test: too few beams, those agreeing
@@ -830,70 +830,11 @@ class GatmoMapper:
                 or np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > c.nudge_max_shift_m
                 or not self._free_ok(o, mt, views)):
             return None
-        if c.nudge_pose_margin is not None and self._pose_explains(o, mt.pose_xytheta, views):
-            self.counts["nudge_pose_refused"] += 1
-            return None
         sup, con = beam_consistency(o, mt.pose_xytheta, views, c.hit_tolerance_m,
                                     c.match_through_m)
         if con > c.match_max_through_fraction * (sup + con):
             return None
         return mt
-
-    def _pose_explains(self, o: MapObject, pose_new: np.ndarray, views: list) -> bool:
-        """``nudge_pose_margin``: whether the nudge of ``o`` to ``pose_new`` could be the pose's
-        error instead. From the laser poses of ``views`` (laser pose, beam angles, ranges,
-        reach) the object's returns fit its new place (the match) and the scans' other
-        returns near the map fit it as they do; from the laser poses moved back by the
-        object's motion (all of it; its translation alone, a match's turn being a degree or
-        two off; or that translation changed by up to a third of its length, as a pose off is
-        seldom off by just what the object seems to have moved) the object's returns would
-        have to land on its old cells and the others fit as well. When the best of those fits
-        all the returns within ``nudge_pose_margin`` of the first, or too few other returns
-        say either way, the pose may be what is off."""
-        c = self.cfg
-        g = self._grid
-        idx = self.object_map.objects.index(o)
-        # a symmetric outline's match may come turned by quarter or half turns: the motion
-        # that stands for it is the least turn with the same footprint
-        same = [pose_new + [0.0, 0.0, k * np.pi / 2] for k in range(4)]
-        same = [p for p in same if _footprint_shift_m(o, pose_new, p) <= 2 * g.resolution_m]
-        pose_new = min(same, key=lambda p: abs(wrap_angle(p[2] - o.pose_xytheta[2])))
-        d = o.pose_xytheta[:2] - pose_new[:2]
-        ring = np.hypot(*d) / 3 * np.stack([np.cos(np.arange(8) * np.pi / 4),
-                                            np.sin(np.arange(8) * np.pi / 4)], axis=1)
-        undos = [inverse(compose(pose_new, inverse(o.pose_xytheta)))]  # new -> old, map frame
-        undos += [np.array([*t, 0.0]) for t in np.vstack([d, d + ring])]
-        fit = np.zeros(len(undos))  # per pose moved back: returns that would fit the map
-        given = 0.0  # from the poses given: the other returns that fit, and the object's
-        n_rest = n_obj = 0
-        for lp, angles, ranges, reach in views:
-            with np.errstate(invalid="ignore"):
-                ok = np.isfinite(ranges) & (ranges > 0.0) & (ranges <= reach)
-            a, r = angles[ok], ranges[ok]
-            lp = np.asarray(lp, dtype=float)
-            rest = mine = None
-            for k, pose in enumerate([lp] + [compose(u, lp) for u in undos]):
-                pts = pose[:2] + r[:, None] * np.stack([np.cos(pose[2] + a),
-                                                        np.sin(pose[2] + a)], axis=1)
-                cells = g.world_to_cell(pts)
-                inb = g.in_bounds(cells)
-                dist = np.full(len(pts), np.inf)
-                own = np.full(len(pts), -1)
-                dist[inb] = self._near_dist[cells[inb, 1], cells[inb, 0]]
-                own[inb] = self._near_owner[cells[inb, 1], cells[inb, 0]]
-                close = dist <= c.offset_fit_m
-                if k == 0:  # the object's returns (as the nudge gathers them) and the others
-                    mine = (dist <= c.nudge_radius_m) & (own == idx)
-                    rest = (dist <= c.absence_near_m) & (own != idx) & ~mine
-                    n_rest += int(rest.sum())
-                    n_obj += int(mine.sum())
-                    given += float(np.sum(close[rest]) + mine.sum())
-                else:
-                    fit[k - 1] += float(np.sum(close[rest])
-                                        + np.sum(close[mine] & (own[mine] == idx)))
-        if n_rest < 4 * c.offset_min_returns:
-            return True
-        return bool(fit.max() >= given - c.nudge_pose_margin * (n_rest + n_obj))
 
     def _owned_by_doubted(self, owner: np.ndarray) -> np.ndarray:
         """(N,) bool: which entries of ``owner`` (object indices, < 0 for none) are in doubt."""
