@@ -52,6 +52,9 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
     census = last_census(scen, tmp / f"c{seed}")
     secs = time.perf_counter() - t0
     before_ate_m = float("nan")
+    # GATMO's changes to the map in that world: every one is false (nothing moved; people
+    # walk), a relocation, an absence or an object added
+    before_changes = dict.fromkeys(("relocated", "absent", "added"), float("nan"))
     if before:  # the same world before anything moved: same seed, no rearrangement
         still = SimConfig.for_preset(preset)
         still.robot.duration_s = sim.robot.duration_s
@@ -60,15 +63,18 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
         r.add_count = 0
         base = simulate_scenario(tmp / f"b{seed}", preset=preset, runs=runs, seed=seed,
                                  config=still)
-        before_ate_m = compare(base.map_yaml, base.logs, tmp / f"d{seed}",
-                               config=stack_config(overrides),
-                               pictures=False).overall["gatmo"]["ate_rmse_m"]
+        res_b = compare(base.map_yaml, base.logs, tmp / f"d{seed}",
+                        config=stack_config(overrides), pictures=False)
+        before_ate_m = res_b.overall["gatmo"]["ate_rmse_m"]
+        before_changes = {k: sum(x.get(k, 0) for x in res_b.rows if x["side"] == "gatmo")
+                          for k in before_changes}
     g = [x for x in res.rows if x["side"] == "gatmo"]
     out = {
         "seed": seed,
         "static_ate_m": res.overall["static"]["ate_rmse_m"],
         "gatmo_ate_m": res.overall["gatmo"]["ate_rmse_m"],
         "before_ate_m": before_ate_m,
+        **{f"before_{k}": v for k, v in before_changes.items()},
         "static_lost": res.overall["static"]["lost_fraction"],
         "gatmo_lost": res.overall["gatmo"]["lost_fraction"],
         "moved": sum(x.get("obj_moved", 0) for x in g),
@@ -350,6 +356,10 @@ def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
         "false_relocations_carried_per_run": float(
             a["false_relocations_carried"].sum() / (len(rows) * runs)),
         "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * runs)),
+        # the same world before anything moved: GATMO's changes per run, all false
+        "before_changes_per_run": ({k: float(a[f"before_{k}"].sum() / (len(rows) * runs))
+                                    for k in ("relocated", "absent", "added")}
+                                   if before else None),
         # after the last run, per seed: objects on pieces, second objects on a piece, objects
         # where no piece stands, pieces no object stands on (map_census)
         "last_run_census_per_seed": {k: float(a[f"last_{k}"].mean()) for k in CENSUS_KEYS},

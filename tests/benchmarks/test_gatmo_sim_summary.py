@@ -9,9 +9,12 @@ from benchmarks.bench_gatmo_sim import summarize
 from gatmo.pipeline.evaluate import CENSUS_KEYS
 
 
-def _row(seed, gatmo_ate_m, static_ate_m, found, moved, stale_ids):
+def _row(seed, gatmo_ate_m, static_ate_m, found, moved, stale_ids, before=None):
+    """``before``: (ATE [m], relocated, absent, added) in the world before anything moved."""
+    b = before or (math.nan,) * 4
     row = {"seed": seed, "static_ate_m": static_ate_m, "gatmo_ate_m": gatmo_ate_m,
-           "before_ate_m": math.nan, "static_lost": 0.2, "gatmo_lost": 0.05,
+           "before_ate_m": b[0], "before_relocated": b[1], "before_absent": b[2],
+           "before_added": b[3], "static_lost": 0.2, "gatmo_lost": 0.05,
            "moved": moved, "found": found, "absent_events": 3, "gone": 8, "gone_noticed": 4,
            "false_relocations": 1, "twin_relocations": 0, "false_absences": 0,
            "false_relocations_carried": seed - 1,
@@ -27,6 +30,7 @@ def test_totals_over_seeds_leave_the_per_seed_lists_to_the_rows():
     rows = [_row(1, 0.1, 1.0, 3, 10, [4, 7]), _row(2, 0.3, 0.2, 1, 10, [])]
     t = summarize(rows, preset="hall", runs=4, overrides=["gatmo.nudge=false"], before=False)
     assert t["seeds"] == 2 and t["gatmo_over_before_ate_median"] is None
+    assert t["before_changes_per_run"] is None
     assert t["gatmo_over_static_ate_median"] == pytest.approx((0.1 + 1.5) / 2)
     assert t["seeds_gatmo_not_worse"] == 1
     assert t["found_over_moved"] == pytest.approx(0.2)
@@ -38,6 +42,16 @@ def test_totals_over_seeds_leave_the_per_seed_lists_to_the_rows():
                                       "missed": 16}}
     assert "last_stale_ids" not in t["last_run_census_per_seed"]
     assert t["seen_both_by_run_and_start"]["found_by_run"] == {1: [4, 4]}
+
+
+def test_changes_before_anything_moved_are_counted_per_run():
+    """In the world before anything moved every relocation, absence and addition is false."""
+    rows = [_row(1, 0.1, 1.0, 3, 10, [], before=(0.05, 2, 1, 0)),
+            _row(2, 0.3, 0.2, 1, 10, [], before=(0.1, 1, 0, 1))]
+    t = summarize(rows, preset="hall", runs=4, overrides=[], before=True)
+    assert t["gatmo_over_before_ate_median"] == pytest.approx((2.0 + 3.0) / 2)
+    assert t["before_changes_per_run"] == pytest.approx(
+        {"relocated": 3 / 8, "absent": 1 / 8, "added": 1 / 8})
 
 
 def test_piece_evidence_counts_the_views_gatmo_took_and_confirmed():
