@@ -78,7 +78,8 @@ class GatmoConfig(GatmoModel):
         "403 run 3, replayed: ATE 0.30 -> 0.17 m). None (the default): such scans count "
         "nothing. At 5, halls 400-419 ATE 0.117 -> 0.168 m (two seeds lost that were not) and "
         "0.151 -> 0.142 m with filter draw 10 (lower on 14 of 20), 100-109 0.102 -> 0.101 m "
-        "with 0.3 more false relocations per seed: no better than the filter's chaos "
+        "and 0.129 -> 0.121 m (draw 10), with 0.2-0.3 more false relocations per seed: no "
+        "better than the filter's chaos "
         "(docs/experiments.md, forty-first session)")
     min_explained_fraction: float = Field(0.3, ge=0, le=1,
                                           description="returns the map explains, else skip")
