@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Literal
-
 from pydantic import Field
 
 from gatmo.config import GatmoModel
@@ -37,11 +35,6 @@ class GatmoConfig(GatmoModel):
     absence_margin_m: float = Field(0.15, ge=0, description="count only cells this far inside")
     absence_beyond_m: float = Field(0.4, gt=0, description="a return this far beyond = gone")
     hit_tolerance_m: float = Field(0.15, gt=0, description="a return this near = there")
-    no_return_hits: bool = Field(
-        False, description="the behaviour before 2026-11-28 (thirty-seventh session), for "
-        "comparison: a beam with no return (at the laser's range limit) counts as ending on "
-        "an object the map expects within hit_tolerance_m of that limit, evidence that the "
-        "object stands there")
     absence_min_beams: int = Field(8, ge=1, description="beams through it before absent")
     absence_through_fraction: float = Field(0.75, gt=0, le=1,
                                             description="of beams through or on it, through")
@@ -56,10 +49,6 @@ class GatmoConfig(GatmoModel):
     absence_from_verified_only: bool = Field(
         True, description="rays seen through objects count only from poses an independent "
         "check confirmed (pose_verified); other poses' returns still show objects there")
-    track_from_verified_only: bool = Field(
-        False, description="unexplained returns feed the tracks (and so the chair grids and "
-        "matches) only from poses an independent check confirmed (pose_verified); other "
-        "poses' returns still count as unexplained")
     agreement_gone_min_beams: int = Field(
         3, ge=1, description="an object this scan sees through with at least this many beams")
     agreement_gone_fraction: float = Field(
@@ -112,10 +101,6 @@ class GatmoConfig(GatmoModel):
         "still_min_hits scans or more that makes it still")
     still_min_hits: int = Field(3, ge=2, description="hits that make a cell's evidence firm")
     chair_max_speed_mps: float = Field(0.15, gt=0)
-    chair_align_cells: int = Field(
-        0, ge=0, description="beyond the paper: each new observation is shifted by up to this "
-        "many cells (per axis) onto the chair's evidence before it is added, so that a pose "
-        "error of a few cm from scan to scan does not smear the grid; 0: off")
     # matching
     match_min_score: float = Field(
         0.75, gt=0, le=1, description="a match's edge score must reach this. 0.75 since "
@@ -125,13 +110,6 @@ class GatmoConfig(GatmoModel):
         "re-measured with them (twenty-second session, tuning seeds 300-319): false "
         "relocations 1.15 -> 0.85 per seed, found 18.1 % -> 14.8 %, ATE 0.150 -> 0.285 m")
     match_patience_scans: int = Field(30, ge=1, description="after this, match despite doubt")
-    match_shift_unseen: bool = Field(
-        False, description="a placed object whose place was not seen this run, neither standing "
-        "there nor seen through (not in doubt), may be shifted (up to doubt_search_m) onto a "
-        "chair near it; off (since the sixteenth session): only objects in doubt are shifted "
-        "(and movable ones back to an earlier pose, prior_earlier_poses). On the Intel log it "
-        "moved a thing still standing 1.2 m, and in the log cut in two a corner piece 0.9 m "
-        "(added again at the end); 40 held-out hall seeds: the same within noise")
     match_unseen_movable: bool = Field(
         False, description="the paper's matching of chairs with movable objects whose place "
         "was not seen this run (after match_patience_scans); off: a piece not visited yet is "
@@ -162,41 +140,12 @@ class GatmoConfig(GatmoModel):
         "makes the chair ambiguous")
     match_ambiguity_patience_scans: int = Field(
         30, ge=1, description="after this many scans of the chair, match despite ambiguity")
-    match_ambiguity_rivals: Literal["unseen", "movable"] = Field(
-        "unseen", description="which objects may make a chair ambiguous: any furniture not "
-        "seen at its place this run, or only those with evidence that they move (absent, in "
-        "doubt, or movable: moved before or look like one that did)")
     match_ambiguity_settle: bool = Field(
         True, description="a chair whose match waited on ambiguity and that leaves (not seen "
         "for tau_memory, or the run ends) takes its best match then, as without the wait")
-    match_ambiguous_min_score: float | None = Field(
-        None, gt=0, le=1, description="beyond the paper: a chair whose match waited on "
-        "ambiguity (match_ambiguity_wait) and is made anyway (after "
-        "match_ambiguity_patience_scans, or settled as it leaves) needs this edge score, "
-        "not only match_min_score; None: off. GATMO fed the true poses (hall seeds 300-309), "
-        "such matches scored 0.82-0.88 when right and 0.75-0.82 for 9 of 12 wrong ones; at "
-        "0.82 false relocations fell 32 -> 20 and finds rose 58 -> 61. In the full stack the "
-        "right ones score lower (0.76-0.88): halls 400-419 over three filter draws, false "
-        "relocations 1.22 -> 0.87 per seed, but found 17.2 % -> 14.1 % (twenty-eighth "
-        "session, docs/experiments.md)")
-    match_settle_min_edge_fraction: float = Field(
-        0.3, ge=0, description="beyond the paper: a match settled as the track leaves "
-        "(match_ambiguity_settle) needs this many chair cells per edge cell of the object; "
-        "at the default, match_min_edge_fraction's value, no more than any match. A chair "
-        "still ambiguous when it leaves was most often seen in part (full stack, tuning hall "
-        "seeds 300-315: settled matches seeing at least 0.8 of the outline 5 right, 0 wrong; "
-        "below it 4 right, 8 wrong, 2 onto an identical piece). At 0.8 over tuning seeds "
-        "300-319: false relocations 1.15 -> 1.10 per seed, found 18.1 % -> 16.4 %: a chair "
-        "refused then is taken later by the absence -> Gamma path. With match_gamma_strict: "
-        "1.15 -> 0.75 on the tuning seeds, but -0.05 and -0.15 per seed (within noise) on "
-        "held-out seeds 100-119 and 400-419, found -1.5 points, ATE +0.03 m")
     match_free_first: bool = Field(
         True, description="beyond the paper: of the alignments a partial view allows, the best "
         "that covers no space seen free (else the best, then refused)")
-    match_free_from: Literal["run", "views"] = Field(
-        "run", description="the free-space test of a chair's match: rays of the whole run "
-        "(match_free_rays, match_max_free_fraction), or the beams of the scans that saw the "
-        "chair (match_through_m, match_max_through_fraction), which share its pose errors")
     match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
     match_max_free_fraction: float = Field(0.05, ge=0, le=1)
     match_edge_sigma_m: float = Field(0.05, gt=0)
@@ -207,14 +156,6 @@ class GatmoConfig(GatmoModel):
         "within doubt_search_m, absent only with no returns around them")
     lookalike_tolerance: float = Field(0.15, gt=0)
     add_min_cells: int = Field(10, ge=1)
-    match_min_verified_scans: int = Field(
-        0, ge=0, description="scans from independently confirmed poses (pose_verified) a chair "
-        "needs before it may relocate a map object; the others still count towards "
-        "chair_min_scans and new objects")
-    match_from_verified_grid: bool = Field(
-        False, description="a chair is matched to map objects on the evidence grid of the "
-        "scans from independently confirmed poses (pose_verified) only; every scan still "
-        "feeds the track, its person / chair verdict and new objects")
     nudge: bool = Field(
         True, description="beyond the paper: an object whose returns miss its outline while "
         "the rest of the scan fits the map (a piece shifted by less than its size) is matched "
@@ -275,44 +216,12 @@ class GatmoConfig(GatmoModel):
     provisional_near_m: float = Field(
         0.15, gt=0, description="returns this close to a provisional landmark's cells are "
         "explained by it (no longer withheld from the localizer)")
-    gamma_split_gap_m: float | None = Field(
-        None, gt=0, description="beyond the paper: a chair's cells more than this apart "
-        "(8-connected after closing gaps up to it) become separate Gamma objects, as region "
-        "growing splits the static map; two pieces side by side seen as one track. None: one "
-        "object per track. At 0.1: tuning seeds 300-319 false relocations 1.05 -> 0.90 per "
-        "seed; held-out hall seeds 400-419 over three filter draws ATE 0.152 -> 0.156 m and "
-        "false relocations 1.22 -> 1.27 per seed, offices one find fewer (docs/experiments.md)")
     gamma_min_verified_scans: int = Field(
         1, ge=0, description="scans from independently confirmed poses a new object needs")
-    match_gamma_to_absent: bool = Field(
-        False, description="beyond the paper: at a run's end, a chair seen this run that never "
-        "passed the matching tests while its track lasted (often too little seen: one face "
-        "of a large piece) and is still there relocates an absent object it fits (score, free "
-        "space, not larger) instead of joining the map as a new object; best fits first")
     match_absence_to_gamma: bool = Field(
         True, description="the paper's order-free matching, one way: an object found absent "
         "is matched to the Gamma objects seen this run (chairs whose tracks ended unmatched). "
         "Off (tuning seeds 300-319): false relocations unchanged, found 18.1 % -> 17.3 %")
-    match_gamma_strict: bool = Field(
-        False, description="beyond the paper: an object found absent takes a Gamma object "
-        "seen this run only if it passes the tests a track's chair must pass that need no "
-        "views: not larger than the object, enough of it seen (match_min_edge_fraction), and no "
-        "different-looking object that fits nearly as well (match_ambiguity_margin). Without "
-        "it that path skips them, and a chair refused by them while its track lasted could "
-        "take the object afterwards. Tuning seeds 300-319: false relocations 1.15 -> 1.00 "
-        "per seed [-0.40, +0.10], found 18.1 % -> 17.8 %, ATE 0.150 -> 0.158 m")
-    part_ring_connected: bool = Field(
-        False, description="beyond the paper: the ring test of a match (part of something "
-        "larger) counts only the unexplained returns 0.1-0.4 m beyond the object's outline "
-        "that continue its own (8-connected through returns), and refuses at "
-        "part_ring_min_cells of them, instead of more than a quarter of its own cells: one "
-        "face of a bench running on past a 0.6 m box's outline is 6 cells against 25")
-    part_ring_min_cells: int = Field(3, ge=1)
-    match_gamma_part_check: bool = Field(
-        False, description="beyond the paper: an object matched to a Gamma object (at an "
-        "absence, match_absence_to_gamma, or at the run's end, match_gamma_to_absent) must "
-        "pass the ring test of a track's match: no more than a few unexplained returns this "
-        "run just outside its outline there (a footstool fits the corner of a sofa)")
     match_extent_check: bool = Field(
         False, description="beyond the paper: a chair whose returns in one scan reach past "
         "the object's sides (its cells' smallest rectangle) by more than "
@@ -328,25 +237,6 @@ class GatmoConfig(GatmoModel):
         "centres reach 3.5-4.6 cm past it on average. A map that marks the cell each return "
         "lands in, or each cell whose centre is inside, has centres up to a cell short of "
         "a side's ends (a piece square to the grid): there about a cell more is needed")
-    match_extent_record: bool = Field(
-        False, description="diagnostics: compute the extent test's verdicts "
-        "(GatmoMapper.extent_seen) without refusing anything")
-    match_rank_extent: bool = Field(
-        False, description="beyond the paper: among a chair's candidates of the same tier, "
-        "earlier pose and edge score (to 0.05), the one the chair's sides reach less far past "
-        "(extent_excess above 0, to 0.01 m) ranks first, before nearness: a 0.50 m box's chair "
-        "is the box's, not a footstool's that fits as well and stands nearer. Needs "
-        "match_extent_check or match_extent_record")
-    match_absence_reclaims: bool = Field(
-        False, description="beyond the paper, its \"regardless of which was seen first\" "
-        "for chairs already matched: an object noticed gone takes a chair a track matched "
-        "to another object earlier in the run if it ranks above that match (as it would "
-        "have, a candidate then); the other object goes back to where it was, with a "
-        "'withdrawn' event")
-    match_gamma_beam_check: bool = Field(
-        False, description="beyond the paper: an object matched to a Gamma object seen this "
-        "run (match_absence_to_gamma, match_gamma_to_absent) must pass the beam test of a "
-        "track's match (match_beam_check) against the scans that saw the Gamma object")
     add_max_passed_fraction: float = Field(
         0.5, ge=0, le=1, description="of a new object's cells, the fraction rays may have "
         "passed (match_free_rays of them, going on add_gone_beyond_m or more) since a return "

@@ -49,7 +49,7 @@ from gatmo.objects.objectmap import MapObject, ObjectMap, shape_from_points
 class Event:
     stamp_s: float
     run: int
-    kind: str  # absent | relocated | restored | withdrawn | movable | added | gamma
+    kind: str  # absent | relocated | restored | movable | added | gamma
     object_id: int
     label: str | None = None
     pose_old: list | None = None
@@ -61,12 +61,10 @@ class Event:
         return dict(self.__dict__)
 
 
-def _rank_key(o: MapObject, mt, tier: int, earlier: bool, excess_m: float = 0.0) -> tuple:
+def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
     """How a match ``mt`` of ``o`` ranks among others: tier first, then at an earlier pose (its
-    prior), the score to 0.05, then how far the chair reaches past ``o`` (``excess_m`` >= 0,
-    0 unless ``match_rank_extent``; the less the better), then nearness to where ``o`` is
-    (look-alikes: the nearest)."""
-    return (tier, earlier, round(mt.score * 20) / 20, -excess_m,
+    prior), the score to 0.05, then nearness to where ``o`` is (look-alikes: the nearest)."""
+    return (tier, earlier, round(mt.score * 20) / 20,
             -float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))))
 
 
@@ -142,9 +140,7 @@ class GatmoMapper:
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "unexplained_sparse": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
-                       "seen_through_scans": 0, "bridged_scans": 0, "gamma_flicker": 0,
-                       "absent_to_gamma": 0, "settle_refused": 0, "ambiguous_refused": 0,
-                       "withdrawn": 0}
+                       "seen_through_scans": 0, "gamma_flicker": 0}
         self._ms: list[float] = []
         self._beams = None
         self._sparse_agrees = False  # the last pose test: too few beams, those agreeing
@@ -183,24 +179,14 @@ class GatmoMapper:
         self._front_through: dict[int, set] = {}
         self._doubt: set[int] = set()
         self._gamma_this_run: set[int] = set()  # Gamma objects seen this run
-        # the scans that saw them this run (their tracks' views), for the beam test of a
-        # later match (match_gamma_beam_check)
-        self._gamma_views: dict[int, list] = {}
-        # and their returns per scan (Metaobject.scan_points), for the extent test
+        # their returns per scan this run (their tracks' Metaobject.scan_points), for the
+        # extent test
         self._gamma_points: dict[int, list] = {}
-        # the extent test's verdicts this run: (object id, match x, y rounded to 1 cm) -> how
-        # far the chair reached beyond the object there [m] (matching.extent_excess; for
-        # diagnostics)
-        self.extent_seen: dict[tuple[int, float, float], float] = {}
         # per (object id, test): how often a chair was refused as this object this run
         self.refusals: dict[tuple[int, str], int] = {}
         # and where the refused chairs were: (object id, test) -> their centres (x, y) [m],
         # rounded to 0.1 m (the benchmark tells the chair at a piece's new place from others)
         self.refused_at: dict[tuple[int, str], set[tuple[float, float]]] = {}
-        # the tracks that matched a chair this run, with what their match displaced:
-        # (track, object id, its pose, status and moved count before, the match's rank key)
-        # (match_absence_reclaims)
-        self._taken: list[tuple] = []
         # the nudge (beyond the paper): per object id, the cells (ix, iy) returns that missed
         # it landed on -> in how many scans, the scans, their views, and the scans at the
         # last try
@@ -360,9 +346,8 @@ class GatmoMapper:
         self._unexplained_dilated = None
         self._near_returns[:] = 0
         self._reset_run_evidence()
-        self._gamma_views.clear()  # "seen this run": a Gamma object's scans of a run before
-        self._gamma_points.clear()  # saw another layout
-        self.extent_seen.clear()  # a long-lived mapper keeps one run's verdicts, not all
+        # "seen this run": a Gamma object's scans of a run before saw another layout
+        self._gamma_points.clear()
         self._run_open = True
 
     def end_run(self) -> list[Event]:
@@ -380,8 +365,6 @@ class GatmoMapper:
         cells = {g.id: self._cells_if_stays(g) for g in seen}
         kept = [g for g in sorted(seen, key=lambda g: -len(g.shape_xy))
                 if cells[g.id] is not None]
-        if self.cfg.match_gamma_to_absent:
-            kept = self._match_absent_to_gamma(kept, events)
         taken = self._grid.occupied.copy()  # the map, and what is added below
         for o in kept:
             cy, cx = cells[o.id]
@@ -426,34 +409,6 @@ class GatmoMapper:
             self.counts["gamma_flicker"] += 1
             return None
         return cy, cx
-
-    def _match_absent_to_gamma(self, kept: list[MapObject], events) -> list[MapObject]:
-        """Beyond the paper, the other order of its "new absences with old chairs": an object
-        absent when a chair was seen whose track never passed the matching tests while it
-        lasted (most often too little of the object seen: one face of a large piece) is
-        matched at the run's end to that chair, now a Gamma object (``kept``: those still
-        there), before the chair would be added as a new object; the best fits first, each
-        object and each chair once. Returns the Gamma objects left."""
-        fits = []
-        for o in self.object_map.A:
-            if o.structure:
-                continue
-            for g in kept:
-                if _larger_than(_diameter(g.shape_xy), o):
-                    self._refused(o, "gamma_larger", g.cells_world())
-                    continue  # what was seen is larger than the object
-                fit = self._fit_gamma_ranked(g, o)
-                if fit is not None:
-                    fits.append((fit[0], len(fits), o, g, fit[1]))
-        used: set[int] = set()
-        for _, _, o, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
-            if o.id in used or g.id in used:
-                continue
-            used |= {o.id, g.id}
-            self.object_map.objects.remove(g)
-            self._relocate(o, mt, self._last_stamp, events)
-            self.counts["absent_to_gamma"] += 1
-        return [g for g in kept if g.id not in used]
 
     def _flicker(self, cy: np.ndarray, cx: np.ndarray) -> float:
         """Of the beams that reached a new object's cells this run since a return first
@@ -517,7 +472,7 @@ class GatmoMapper:
                       - self.cfg.match_through_m)
         if self.cfg.nudge and pose_verified:
             self._nudge(pts, lp, scan, stamp_s, events)
-        if track and (pose_verified or not self.cfg.track_from_verified_only):
+        if track:
             self._track(un[np.hypot(*(un - lp[:2]).T) <= reach], stamp_s, events,
                         verified=bool(pose_verified))
         self._expire(stamp_s, events)
@@ -527,15 +482,6 @@ class GatmoMapper:
                 self._sync_localizer()
         self._ms.append((time.perf_counter() - t0) * 1e3)
         return events
-
-    def note_unexplained(self, pose_xytheta, scan: Scan) -> None:
-        """Count the returns of a scan laid from ``pose_xytheta`` (base, map frame) that the
-        current map does not explain (:meth:`unexplained_at`), and nothing else: a pose
-        carried by odometry alone is no evidence of absence, and feeds no track."""
-        lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
-        pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
-        _, explained = self._explained(pts)
-        self._count_unexplained(pts[~explained])
 
     def _count_unexplained(self, points_xy: np.ndarray) -> None:
         """Add map-frame returns (N, 2) the map does not explain to this run's counts."""
@@ -565,35 +511,6 @@ class GatmoMapper:
             return "skipped_disagreement"
         return on / max(n, 1)
 
-    def bridged(self, pose_xytheta, scan: Scan, *, stamp_s: float,
-                hits_counted: bool) -> list[Event]:
-        """Evidence of absence only, from a scan taken earlier in this run whose pose was
-        bridged between two confirmed poses (the stack's ``fusion.bridge_evidence``): the
-        scan's rays and beams through objects count as a confirmed scan's would, and may mark
-        objects absent (events stamped ``stamp_s``, when the bridge closed); nothing is
-        tracked, nudged or masked. ``hits_counted``: :meth:`update` already had this scan from
-        a pose it was not told was confirmed, so its returns on objects were counted then and
-        are not counted again. Beyond the paper."""
-        events: list[Event] = []
-        lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
-        pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
-        kept = self._beams, self._expected
-        try:
-            fit = self._fits_map(lp, scan, pts, self._explained(pts)[0])
-            if isinstance(fit, str):
-                return events
-            if hits_counted:  # the beams ending on objects were counted by update()
-                b = self._beams
-                self._beams = (*b[:3], np.zeros_like(b[3]), *b[4:])
-            else:
-                self._count_near_returns(pts, lp)
-            self.counts["bridged_scans"] += 1
-            self._absence(lp, scan, pts, stamp_s, events, agreement=fit,
-                          sees_through=True, count_hits=not hits_counted)
-        finally:
-            self._beams, self._expected = kept
-        return events
-
     def unexplained_at(self, points_xy: np.ndarray, min_count: int = 2) -> np.ndarray:
         """(N,) bool: map-frame points (N, 2) that land where this run's returns were not
         explained by the current map (at least ``min_count`` of them, in the point's cell or a
@@ -613,14 +530,6 @@ class GatmoMapper:
         if self._prov_near is not None:  # the localizer's map has them (provisional_landmarks)
             out[ok] &= ~self._prov_near[cy, cx]
         return out
-
-    def doubted_at(self, points_xy: np.ndarray) -> np.ndarray:
-        """(N,) bool: map-frame points (N, 2) within delta_W of an object in doubt (beams
-        passed through part of it this run: it may have been shifted, and returns near its
-        old place would pull a localizer towards it). Beyond the paper."""
-        if not self._doubt:
-            return np.zeros(len(points_xy), dtype=bool)
-        return self._near_objects_at(points_xy, self._owned_by_doubted)
 
     def withheld_at(self, points_xy: np.ndarray) -> np.ndarray:
         """(N,) bool: map-frame points (N, 2) within delta_W of an object left out of the
@@ -787,31 +696,6 @@ class GatmoMapper:
             return []  # the scan as a whole misses the map: the pose, not an object, is off
         return odd
 
-    def beams_off_at(self, laser_pose_xytheta: np.ndarray, scan: Scan) -> np.ndarray:
-        """(V,) bool over the scan's valid beams (``scan.valid``): the returns, seen from the
-        laser at ``laser_pose_xytheta`` (map frame, a predicted pose), of the objects whose
-        beams miss them while the rest of the scan fits the map (:meth:`_objects_off`, the
-        nudge's test). Beyond the paper, for the localizer: a piece shifted or turned by less
-        than its size returns partly inside its old outline, so the median distance of its
-        returns to the map (:meth:`offset_at`) stays near zero while the rest pulls the
-        particles towards its old place; its beams ending before or beyond it show it (a beam
-        with no return went on beyond it)."""
-        lp = np.asarray(laser_pose_xytheta, dtype=float)
-        valid = scan.valid
-        out = np.zeros(int(valid.sum()), dtype=bool)
-        a = lp[2] + scan.angles_rad[valid]
-        pts = lp[:2] + scan.ranges_m[valid, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
-        near = self._returns_near_map(pts, lp)
-        if near is None:
-            return out
-        idx, _, dist, owner = near
-        with np.errstate(invalid="ignore"):  # a no-return beam went on beyond (NaN: nothing)
-            informative = valid | (scan.ranges_m >= scan.range_max_m)
-        expected, _, _, beam_owner = self._expected_ends(lp, scan, informative)
-        for _, mine in self._objects_off(dist, owner, beam_owner, scan, expected):
-            out[idx[mine]] = True
-        return out
-
     def _nudge_fit(self, o: MapObject):
         """The match of ``o`` onto the returns gathered by :meth:`_nudge`, or None."""
         c = self.cfg
@@ -823,12 +707,12 @@ class GatmoMapper:
         if _larger_than(_diameter(pts), o):
             return None
         views = self._nudge_views.get(o.id, [])
-        mt = self._match(pts, o, views)
+        mt = self._match(pts, o)
         now = self._field(o).score(transform_points(inverse(o.pose_xytheta), pts))
         if (mt.score < c.match_min_score or mt.score < now + c.nudge_min_gain
                 or _footprint_shift_m(o, o.pose_xytheta, mt.pose_xytheta) <= c.nudge_min_shift_m
                 or np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > c.nudge_max_shift_m
-                or not self._free_ok(o, mt, views)):
+                or not self._free_consistent(o, mt)):
             return None
         sup, con = beam_consistency(o, mt.pose_xytheta, views, c.hit_tolerance_m,
                                     c.match_through_m)
@@ -869,12 +753,11 @@ class GatmoMapper:
 
     # Algorithm 1, with hits clearing seen-through marks (beyond the paper)
     def _absence(self, lp, scan, pts, stamp_s, events, agreement: float,
-                 sees_through: bool = True, count_hits: bool = True) -> None:
+                 sees_through: bool = True) -> None:
         """Alg. 1 and the beam evidence for one scan whose pose agrees with the map on
         ``agreement`` of the beams (:meth:`_agreement`). ``sees_through`` False (a pose only
         the filter vouches for): the scan's returns still show objects there, but its rays
-        and beams passing through objects are no evidence they are gone. ``count_hits``
-        False: this scan's returns on objects were counted before (:meth:`bridged`)."""
+        and beams passing through objects are no evidence they are gone."""
         g = self._grid
         c = self.cfg
         beams = self._beams
@@ -909,7 +792,7 @@ class GatmoMapper:
         self._passed[hit_cells[okh, 1], hit_cells[okh, 0]] = 0
         hit_own = self._owner[hit_cells[okh, 1], hit_cells[okh, 0]]
         hit_loc = self._local[hit_cells[okh, 1], hit_cells[okh, 0]]
-        for i in np.unique(hit_own[hit_own >= 0]) if count_hits else ():
+        for i in np.unique(hit_own[hit_own >= 0]):
             o = objs[int(i)]
             o.seen_count += 1
             if o.id in self._seen:  # returns on the object: those cells are there
@@ -1021,11 +904,10 @@ class GatmoMapper:
         own_deeper[inside] = self._owner[deeper[inside, 1], deeper[inside, 0]]
         through = ok & (r > expected + c.absence_beyond_m) & (own_deeper == own)
         on = ok & (np.abs(r - expected) <= c.hit_tolerance_m)
-        if not c.no_return_hits:
-            # a beam with no return reads the range limit and ended on nothing: near the limit
-            # it used to count as ending on any object the map expected there, and a gone
-            # piece the robot drove towards collected such hits until it could not be absent
-            on &= scan.valid
+        # a beam with no return reads the range limit and ended on nothing: near the limit
+        # it used to count as ending on any object the map expected there, and a gone
+        # piece the robot drove towards collected such hits until it could not be absent
+        on &= scan.valid
         # beyond absence_max_range_m a heading error of a degree moves a beam by more than a
         # small object's width: such beams are no evidence for or against an object
         own_near = np.where(expected <= c.absence_max_range_m, own, -1)
@@ -1142,7 +1024,7 @@ class GatmoMapper:
                     fits.append((fit[0], len(fits), m, None, None))
         for g in self.object_map.Gamma if self.cfg.match_absence_to_gamma else []:
             if g.id in self._gamma_this_run:  # seen in an earlier run only: no evidence
-                fit = self._fit_gamma_ranked(g, o, strict=self.cfg.match_gamma_strict)
+                fit = self._fit_gamma_ranked(g, o)
                 if fit is not None:
                     fits.append((fit[0], len(fits), None, g, fit[1]))
         for _, _, m, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
@@ -1153,8 +1035,6 @@ class GatmoMapper:
             elif g in self.object_map.objects:
                 self.object_map.objects.remove(g)
                 self._relocate(o, mt, stamp_s, events)
-        if self.cfg.match_absence_reclaims and o.status == "A" and not o.structure:
-            self._reclaim(o, stamp_s, events)
 
     # ---------------------------------------------------------- metaobjects
     def _track(self, pts, stamp_s, events, verified: bool = True) -> None:
@@ -1223,10 +1103,8 @@ class GatmoMapper:
 
     def _candidates(self, pts: np.ndarray) -> list[tuple[int, MapObject]]:
         """(tier, object) pairs a chair may be: absent ones (paper) and placed ones near it in
-        doubt, tier 0; placed ones near it not yet seen at their place this run, tier 1 (a
-        shift: only a match near their pose counts, then as tier 0; with
-        ``match_shift_unseen``); movable ones elsewhere
-        not seen at their place this run (paper: A and M), tier -1; with
+        doubt, tier 0; movable ones elsewhere not seen at their place this run (paper: A and
+        M), tier -1; with
         ``prior_earlier_poses``, movable ones elsewhere not seen at their place this run that
         stood near the chair before, tier -2 (only a match at an earlier pose counts, then as
         tier 0)."""
@@ -1243,8 +1121,8 @@ class GatmoMapper:
             confirmed = self._confirmed(o)
             near = np.hypot(*(o.pose_xytheta[:2] - c)) < self.cfg.doubt_search_m + o.extent_m()
             doubted = o.id in self._doubt
-            if near and not confirmed and (doubted or self.cfg.match_shift_unseen):
-                out.append((0 if doubted else 1, o))
+            if near and not confirmed and doubted:
+                out.append((0, o))
             elif o.status == "M" and not confirmed and self.cfg.match_unseen_movable:
                 out.append((-1, o))
             elif o.status == "M" and not confirmed and self.cfg.prior_earlier_poses:
@@ -1276,11 +1154,10 @@ class GatmoMapper:
     def _chair_view(self, m: Metaobject) -> tuple[np.ndarray, np.ndarray, float] | None:
         """(chair points, every return the track had, the chair's diameter [m]) of track
         ``m``, or None while it has fewer than ``chair_min_cells`` chair cells."""
-        v = self.cfg.match_from_verified_grid
-        pts = m.chair_points(verified=v)
+        pts = m.chair_points()
         if len(pts) < self.cfg.chair_min_cells:
             return None
-        return pts, m.chair_points(min_count=1, min_fraction=0.0, verified=v), _diameter(pts)
+        return pts, m.chair_points(min_count=1, min_fraction=0.0), _diameter(pts)
 
     def _fit(self, m: Metaobject, o: MapObject, tier: int,
              view: tuple[np.ndarray, np.ndarray, float]) -> tuple[tuple, object] | None:
@@ -1310,12 +1187,12 @@ class GatmoMapper:
             return "larger"  # what is seen is larger than the object
         if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
             return "too_little"  # too little of the object seen yet to tell look-alikes apart
-        mt = self._match(pts, o, m.views)
+        mt = self._match(pts, o)
         if mt.score < self.cfg.match_min_score:
             return "score"
         if self._extends_beyond(o, mt, m.scan_points):
             return "extent"
-        if not self._free_ok(o, mt, m.views):
+        if not self._free_consistent(o, mt):
             return "free_space"
         # every return the track ever had must fit too, or this is a part of something
         # larger (a desk's corner looks like a footstool's)
@@ -1326,34 +1203,20 @@ class GatmoMapper:
             return "part_of_larger"
         if self.cfg.match_beam_check and not self._beams_consistent(o, mt, m.views):
             return "beams"
-        # placed, seen nowhere yet and not in doubt (tier 1), or a speck: only a shift nearby
-        if (tier == 1 or not self._distinctive(o)) and self._far(o, mt):
+        # a speck: only a shift nearby
+        if not self._distinctive(o) and self._far(o, mt):
             return "far"
         earlier = self._at_earlier_pose(o, mt.pose_xytheta)
         if tier == -2 and not earlier:
             return "not_earlier"
-        if tier in (1, -2):  # a shift nearby, or back where it stood: as good as doubted
+        if tier == -2:  # back where it stood: as good as doubted
             tier = 0
-        return _rank_key(o, mt, tier, earlier, self._rank_excess(o, mt)), mt
-
-    def _rank_excess(self, o: MapObject, mt) -> float:
-        """With ``match_rank_extent``: how far the chair matched to ``o`` at ``mt`` reached
-        past it (the extent test's verdict just computed, above 0, to 0.01 m), else 0."""
-        if not self.cfg.match_rank_extent:
-            return 0.0
-        ex = self.extent_seen.get(self._extent_key(o, mt))
-        return 0.0 if ex is None else round(max(ex, 0.0) * 100) / 100
-
-    @staticmethod
-    def _extent_key(o: MapObject, mt) -> tuple:
-        return (o.id, round(float(mt.pose_xytheta[0]), 2), round(float(mt.pose_xytheta[1]), 2))
+        return _rank_key(o, mt, tier, earlier), mt
 
     def _try_match(self, m: Metaobject, stamp_s, events, settle: bool = False) -> bool:
         """Match the chair of track ``m`` to the best candidate (:meth:`_candidates`) that
         passes every test, and relocate it. ``settle``: the track is leaving, so a match held
         back as ambiguous is made now (``match_ambiguity_settle``)."""
-        if m.n_verified < self.cfg.match_min_verified_scans:
-            return False
         view = self._chair_view(m)
         if view is None:
             return False
@@ -1370,19 +1233,10 @@ class GatmoMapper:
         if best is None:
             return False
         _, o, mt = best
-        if settle and len(view[0]) < self.cfg.match_settle_min_edge_fraction * len(o.edge_xy):
-            self.counts["settle_refused"] += 1  # still ambiguous, and too little of it seen
-            return False
         if (self.cfg.match_ambiguity_wait and not settle
                 and m.n_obs < self.cfg.match_ambiguity_patience_scans
                 and self._ambiguous(m.views, o, mt, view)):
             m.waited = True
-            return False
-        floor = self.cfg.match_ambiguous_min_score
-        if m.waited and floor is not None and mt.score < floor:
-            # made despite the ambiguity: a rival shape fit nearly as well all along, and a
-            # fit this loose was as often another piece (or a new one) as this object
-            self.counts["ambiguous_refused"] += 1
             return False
         patient = m.n_obs < self.cfg.match_patience_scans
         if patient:
@@ -1391,52 +1245,9 @@ class GatmoMapper:
                 if (o2 is not o and k2[:2] == best[0][:2] and k2[2] >= best[0][2] - 0.05
                         and not lookalike(o2, o, self.cfg.lookalike_tolerance)):
                     return False
-        if self.cfg.match_absence_reclaims:
-            self._taken.append((m, o.id, o.pose_xytheta.copy(), o.status, o.moved_count,
-                                best[0]))
         self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)
         m.matched_object = o.id
         return True
-
-    def _reclaim(self, o: MapObject, stamp_s, events) -> None:
-        """With ``match_absence_reclaims``: ``o``, just noticed gone, takes the chair of a
-        track that matched another object earlier this run if ``o`` ranks above that object
-        on the chair as it is now (:func:`_rank_key` before nearness: tier, earlier pose,
-        score to 0.05, reach past the outline), as it would have had it been gone then; the
-        best such chair first. Not from a look-alike (twins tie but for nearness, and a
-        grown chair's score is no evidence between them). The other object goes back to
-        its pose and list before the match (a 'withdrawn' event)."""
-        best = None
-        for i, (m, pid, _, _, _, key) in enumerate(self._taken):
-            prev = self.object_map.by_id.get(pid)
-            if (prev is None or m.matched_object != pid or prev.status not in ("U", "M")
-                    or lookalike(prev, o, self.cfg.lookalike_tolerance)):
-                continue
-            view = self._chair_view(m)
-            fit = None if view is None else self._fit(m, o, 0, view)
-            if fit is None:
-                continue
-            held = self._match(view[0], prev, m.views)  # the holder on the chair as it is now
-            if self.cfg.match_extent_check or self.cfg.match_extent_record:
-                self._extent_verdict(prev, held, m.scan_points)  # its reach, for the key
-            now = _rank_key(prev, held, key[0], key[1], self._rank_excess(prev, held))
-            if fit[0][:4] > now[:4] and (best is None or fit[0] > best[0]):
-                best = (fit[0], i, fit[1])
-        if best is None:
-            return
-        _, i, mt = best
-        m, pid, pose, status, moved_count, _ = self._taken.pop(i)
-        prev = self.object_map.by_id[pid]
-        events.append(Event(float(stamp_s), self.run, "withdrawn", prev.id, prev.label,
-                            prev.pose_xytheta.tolist(),
-                            pose.tolist() if status in ("U", "M") else None))
-        prev.pose_xytheta, prev.status, prev.moved_count = pose, status, moved_count
-        prev.record(self.run, stamp_s)
-        self._clear_evidence(prev.id)
-        self.counts["withdrawn"] += 1
-        self._taken.append((m, o.id, o.pose_xytheta.copy(), o.status, o.moved_count, best[0]))
-        self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)
-        m.matched_object = o.id
 
     def _settle(self, m: Metaobject, stamp_s, events) -> bool:
         """A leaving track whose match waited on ambiguity takes its best match now, with
@@ -1449,38 +1260,32 @@ class GatmoMapper:
         """``o`` was seen standing at its place this run (and is not in doubt)."""
         return self._hits.get(o.id, 0) >= self.cfg.confirm_min_beams and o.id not in self._doubt
 
-    def _ambiguous(self, views: list | None, o: MapObject, mt,
+    def _ambiguous(self, views: list, o: MapObject, mt,
                    view: tuple[np.ndarray, np.ndarray, float]) -> bool:
         """Beyond the paper: the chair seen by the scans ``views`` (a track's
         :attr:`Metaobject.views`), matched to ``o`` at ``mt``, fits an
         object that does not look like ``o`` and could be it (furniture not seen at its place
         this run, candidate or not) nearly as well: within ``match_ambiguity_margin``, not
         larger than it, free space and beams consistent there. What is seen of it does not
-        yet tell the two apart (a corner of a lounge chair is a corner of a cabinet). With
-        ``match_ambiguity_rivals: movable`` only objects known to move count as rivals.
-        ``views`` None (a Gamma object's cells in ``view``): free space is judged on the
-        run's rays and beams are not checked."""
+        yet tell the two apart (a corner of a lounge chair is a corner of a cabinet)."""
         pts, _, diam_p = view
         shapes: list[MapObject] = [o]
         for r in self.object_map.objects:
-            movable = r.status in ("M", "A") or r.id in self._doubt
             # (an object is no rival of itself: lookalike() says nothing of specks too small
             # to call a shape, not even that one looks like itself)
             if (r is o or r.structure or r.status not in ("U", "M", "A") or not self._distinctive(r)
                     or self._confirmed(r)
-                    or (self.cfg.match_ambiguity_rivals == "movable" and not movable)
                     or any(lookalike(r, q, self.cfg.lookalike_tolerance) for q in shapes)):
                 continue
             shapes.append(r)
             if _larger_than(diam_p, r):
                 continue
-            mr = self._match(pts, r, views)
+            mr = self._match(pts, r)
             if mr.score < mt.score - self.cfg.match_ambiguity_margin:
                 continue
-            if not self._free_ok(r, mr, views):
+            if not self._free_consistent(r, mr):
                 continue
-            if (views is not None and self.cfg.match_beam_check
-                    and not self._beams_consistent(r, mr, views)):
+            if self.cfg.match_beam_check and not self._beams_consistent(r, mr, views):
                 continue
             self.counts["ambiguous"] += 1
             return True
@@ -1488,15 +1293,12 @@ class GatmoMapper:
 
     def _ring_counts(self, o: MapObject, pose_xytheta: np.ndarray, counts: np.ndarray,
                      r_in_m: float, r_out_m: float, min_hits: int = 2,
-                     own_index: int | None = None,
-                     connected: bool = False) -> tuple[int, int]:
+                     own_index: int | None = None) -> tuple[int, int]:
         """(cells of the object placed at ``pose_xytheta``, cells of the ring ``r_in_m`` <
         d <= ``r_out_m`` beyond its outline) holding at least ``min_hits`` of ``counts``
         (a per-cell grid of returns this run). With ``own_index`` (the object's index in the
         map), ring cells nearer to another object or wall are left out. -1, -1 when the
-        object is off the map. ``connected``: only ring cells joined to the object's own cells
-        through cells holding ``min_hits`` (8-connected) count: what continues past its
-        outline, not something standing apart nearby."""
+        object is off the map."""
         g = self._grid
         cells = g.world_to_cell(o.cells_world(pose_xytheta, dense=True))
         ok = g.in_bounds(cells)
@@ -1515,45 +1317,25 @@ class GatmoMapper:
             ring &= (self._near_owner[win] == own_index) | \
                 (self._near_dist[win] > self.cfg.delta_W_m)
         hit = counts[win] >= min_hits
-        if connected:
-            lab, _ = ndimage.label(hit & (d <= r_out_m), structure=np.ones((3, 3), dtype=bool))
-            own = np.unique(lab[mask & hit])
-            hit = np.isin(lab, own[own > 0])
-            return int((hit & mask).sum()), int((hit & ring).sum())
         return int(hit[mask].sum()), int(hit[ring].sum())
 
     def _part_of_larger(self, o: MapObject, mt) -> bool:
         """Beyond the paper: unexplained returns this run just outside the object placed at the
         match (a ring 0.1-0.4 m beyond its outline) mean what was seen is a part of something
         larger; a footstool fits any corner of a desk."""
-        c = self.cfg
-        inside, outside = self._ring_counts(o, mt.pose_xytheta, self._unexplained, 0.1, 0.4,
-                                            connected=c.part_ring_connected)
+        inside, outside = self._ring_counts(o, mt.pose_xytheta, self._unexplained, 0.1, 0.4)
         if inside < 0:
             return True
-        if c.part_ring_connected:
-            # a face that runs on past the outline: a corner of a bench is no footstool
-            return bool(outside >= c.part_ring_min_cells)
         return bool(outside > max(3, 0.25 * inside))
 
     def _extends_beyond(self, o: MapObject, mt, scan_points: list) -> bool:
         """With ``match_extent_check``: what single scans saw of the chair reaches more than
         ``match_extent_max_excess_m`` beyond ``o`` placed at ``mt`` along one of its sides
-        (:meth:`_extent_verdict`). With ``match_extent_record`` the verdict is kept in
-        :attr:`extent_seen` and nothing is refused."""
-        if not (self.cfg.match_extent_check or self.cfg.match_extent_record):
+        (:func:`extent_excess` of its returns ``scan_points``)."""
+        if not self.cfg.match_extent_check:
             return False
-        ex = self._extent_verdict(o, mt, scan_points)
-        return (ex is not None and self.cfg.match_extent_check
-                and ex > self.cfg.match_extent_max_excess_m)
-
-    def _extent_verdict(self, o: MapObject, mt, scan_points: list) -> float | None:
-        """How far the chair's returns ``scan_points`` reach past ``o`` placed at ``mt``
-        (:func:`extent_excess`) [m], kept in :attr:`extent_seen`; None without returns."""
         ex = extent_excess(o, mt.pose_xytheta, scan_points, rect=self._field(o).rect)
-        if ex is not None:
-            self.extent_seen[self._extent_key(o, mt)] = ex
-        return ex
+        return ex is not None and ex > self.cfg.match_extent_max_excess_m
 
     def _beams_consistent(self, o: MapObject, mt, views: list) -> bool:
         """Beyond the paper: of the beams of the scans that saw the chair (``views``, as
@@ -1577,28 +1359,15 @@ class GatmoMapper:
                                          self.cfg.absence_near_m, own_index=idx)
         return inside + near >= self.cfg.absence_near_min_cells
 
-    def _match(self, pts: np.ndarray, o: MapObject, views: list | None = None):
+    def _match(self, pts: np.ndarray, o: MapObject):
         """``o`` matched onto the chair points ``pts`` (P, 2) (map frame): its edge field,
         its yaw as the prior, and with ``match_free_first`` the free-space test choosing
-        (:meth:`_free_ok`; ``views``: the scans that saw the points)."""
+        (:meth:`_free_consistent`)."""
         def free(pose: np.ndarray) -> bool:
-            return self._free_ok(o, SimpleNamespace(pose_xytheta=pose), views)
+            return self._free_consistent(o, SimpleNamespace(pose_xytheta=pose))
 
         return match_points(pts, o, self.cfg, self._field(o), prior_yaw=o.pose_xytheta[2],
                             accept=free if self.cfg.match_free_first else None)
-
-    def _free_ok(self, o: MapObject, mt, views: list | None) -> bool:
-        """The free-space test of a match: :meth:`_free_consistent` (rays of the whole run),
-        or with ``match_free_from: views`` and the scans that saw the chair (``views``), that
-        few of their beams went on well past the object placed there
-        (:func:`beam_consistency`). Beyond the paper: a tenth of the poses a rearranged room
-        leaves the stack are 0.1-0.3 m off (the furniture in view pulled them), and their rays
-        cross where a piece now stands; the scans that saw the chair share its pose errors."""
-        if self.cfg.match_free_from == "run" or views is None:
-            return self._free_consistent(o, mt)
-        sup, con = beam_consistency(o, mt.pose_xytheta, views, self.cfg.hit_tolerance_m,
-                                    self.cfg.match_through_m)
-        return con <= self.cfg.match_max_through_fraction * max(sup + con, 1)
 
     def _fit_gamma(self, g: MapObject, o: MapObject):
         """The match of ``o`` onto the Gamma object ``g`` (a chair seen, never added), or
@@ -1617,38 +1386,15 @@ class GatmoMapper:
         if not self._free_consistent(o, mt):
             self._refused(o, "gamma_free_space", pts)
             return None
-        if self.cfg.match_gamma_part_check and self._part_of_larger(o, mt):
-            self._refused(o, "gamma_part_of_larger", pts)
-            return None
-        views = self._gamma_views.get(g.id) if self.cfg.match_gamma_beam_check else None
-        if views and not self._beams_consistent(o, mt, views):
-            self._refused(o, "gamma_beams", pts)
-            return None
         return mt
 
-    def _fit_gamma_ranked(self, g: MapObject, o: MapObject,
-                          strict: bool = False) -> tuple[tuple, object] | None:
+    def _fit_gamma_ranked(self, g: MapObject, o: MapObject) -> tuple[tuple, object] | None:
         """(:func:`_rank_key` as a tier-0 candidate, match) of ``o`` onto the Gamma object
-        ``g`` (:meth:`_fit_gamma`), or None. ``strict`` (``match_gamma_strict``): also the
-        track tests that need no views: not larger, not too little of ``o`` seen, not
-        ambiguous (:meth:`_ambiguous`)."""
-        if strict:
-            pts = g.cells_world()
-            view = (pts, pts, _diameter(pts))
-            if _larger_than(view[2], o):
-                self._refused(o, "gamma_larger", pts)
-                return None
-            if len(pts) < self.cfg.match_min_edge_fraction * len(o.edge_xy):
-                self._refused(o, "gamma_too_little", pts)
-                return None
+        ``g`` (:meth:`_fit_gamma`), or None."""
         mt = self._fit_gamma(g, o)
         if mt is None:
             return None
-        if strict and self._ambiguous(None, o, mt, view):
-            self._refused(o, "gamma_ambiguous", pts)
-            return None
-        return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta),
-                         self._rank_excess(o, mt)), mt
+        return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
 
     def _far(self, o: MapObject, mt) -> bool:
         """The match ``mt`` puts ``o`` more than ``doubt_search_m`` from where it is."""
@@ -1741,16 +1487,13 @@ class GatmoMapper:
             # confirmed; a confidently wrong filter makes furniture out of walls
             self.counts["gamma_unverified"] += 1
             return
-        gap = self.cfg.gamma_split_gap_m
-        for part in ([pts] if gap is None else _split_cells(pts, self._grid.resolution_m, gap)):
-            if len(part) >= self.cfg.chair_min_cells:
-                self._gamma_part(part, stamp_s, events, m.views, m.scan_points)
+        self._gamma_part(pts, stamp_s, events, m.scan_points)
 
-    def _gamma_part(self, pts: np.ndarray, stamp_s, events, views: list,
+    def _gamma_part(self, pts: np.ndarray, stamp_s, events,
                     scan_points: list | None = None) -> None:
         """Cells ``pts`` (P, 2) of a chair become a Gamma object, or join the one they overlap;
-        ``views``: the scans of its track that saw it (:attr:`Metaobject.views`), and
-        ``scan_points`` their returns on it (:attr:`Metaobject.scan_points`)."""
+        ``scan_points``: the returns on it of the scans of its track that saw it
+        (:attr:`Metaobject.scan_points`)."""
         # a part of an object the map already has where it stands (seen before it was placed
         # there) is no new object
         near, _ = self._explained(pts)
@@ -1765,7 +1508,6 @@ class GatmoMapper:
             same.shape_xy, same.edge_xy, same.pose_xytheta = shape, edge, pose
             same.seen_count += 1
             self._gamma_this_run.add(same.id)
-            self._gamma_views.setdefault(same.id, []).extend(views)
             self._gamma_points.setdefault(same.id, []).extend(scan_points or [])
             self._fields.pop(same.id, None)
             self._inner.pop(same.id, None)
@@ -1778,7 +1520,6 @@ class GatmoMapper:
         o.record(self.run, stamp_s)
         self.object_map.objects.append(o)
         self._gamma_this_run.add(o.id)
-        self._gamma_views[o.id] = list(views)
         self._gamma_points[o.id] = list(scan_points or [])
         events.append(Event(float(stamp_s), self.run, "gamma", o.id, None, None,
                             pose.tolist()))
@@ -1820,22 +1561,6 @@ def _ray_ends(lp, scan: Scan, pts: np.ndarray, cap_m: float,
         a = lp[2] + scan.angles_rad[none]
         ends = np.vstack([ends, lp[:2] + none_r * np.stack([np.cos(a), np.sin(a)], axis=1)])
     return ends
-
-
-def _split_cells(points_xy: np.ndarray, resolution_m: float, gap_m: float) -> list[np.ndarray]:
-    """``points_xy`` (P, 2), cell centres, grouped into 8-connected components after closing
-    gaps of up to ``gap_m`` (binary dilation by half of it, rounded up to a cell)."""
-    keys = np.floor(points_xy / resolution_m).astype(np.int64)
-    lo = keys.min(axis=0)
-    r = int(np.ceil(gap_m / (2 * resolution_m)))
-    ij = keys - lo + r
-    mask = np.zeros(tuple(ij.max(axis=0) + r + 1)[::-1], dtype=bool)
-    mask[ij[:, 1], ij[:, 0]] = True
-    grown = ndimage.binary_dilation(mask, structure=np.ones((3, 3), bool), iterations=r) \
-        if r > 0 else mask
-    labels, n = ndimage.label(grown, structure=np.ones((3, 3), bool))
-    lab = labels[ij[:, 1], ij[:, 0]]
-    return [points_xy[lab == k] for k in range(1, n + 1)]  # each holds a point it grew from
 
 
 def _inner_cells(o: MapObject) -> np.ndarray:

@@ -108,9 +108,6 @@ class Metaobject:
             self.kf.update(c)
         self.centres.append(c)
         keys = {tuple(k) for k in self._keys(points).tolist()}
-        k_align = self.cfg.chair_align_cells
-        if k_align > 0 and self.n_obs >= 2 and len(self.evidence) >= self.cfg.chair_min_cells:
-            keys = self._aligned(keys, k_align)
         for k in keys:
             self.evidence[k] = self.evidence.get(k, 0) + 1
         if verified:
@@ -119,24 +116,6 @@ class Metaobject:
             self.n_verified += 1
         self.n_obs += 1
         self.last_seen = stamp_s
-
-    def _aligned(self, keys: set, k: int) -> set:
-        """``keys`` shifted by the offset of at most ``k`` cells per axis that lands them on
-        the most evidence (ties: the smallest shift). Only the evidence grid is aligned: the
-        centre, and so the person hypothesis, keeps the raw points."""
-        ev = self.evidence
-        best, best_score = (0, 0), sum(ev.get(q, 0) for q in keys)
-        for dx in range(-k, k + 1):
-            for dy in range(-k, k + 1):
-                if dx == 0 and dy == 0:
-                    continue
-                score = sum(ev.get((qx + dx, qy + dy), 0) for qx, qy in keys)
-                if score > best_score or (score == best_score
-                                          and dx * dx + dy * dy < best[0] ** 2 + best[1] ** 2):
-                    best, best_score = (dx, dy), score
-        if best == (0, 0):
-            return keys
-        return {(qx + best[0], qy + best[1]) for qx, qy in keys}
 
     # ---------------------------------------------------------------- verdicts
     @property

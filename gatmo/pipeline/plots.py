@@ -43,17 +43,9 @@ def _zoom(ax, *trajs) -> None:
 
 def shown_moves(events: list[dict]) -> list[dict]:
     """The relocation and addition events (as dicts, in order) the map picture draws: those
-    with a new pose, less each relocation a later 'withdrawn' event took back."""
-    shown: list[dict] = []
-    for ev in events:
-        if ev.get("kind") in ("relocated", "added") and ev.get("pose_new") is not None:
-            shown.append(ev)
-        elif ev.get("kind") == "withdrawn":
-            last = [i for i, e in enumerate(shown)
-                    if e.get("object_id") == ev.get("object_id") and e["kind"] == "relocated"]
-            if last:
-                shown.pop(last[-1])
-    return shown
+    with a new pose."""
+    return [ev for ev in events
+            if ev.get("kind") in ("relocated", "added") and ev.get("pose_new") is not None]
 
 
 def plot_log(out_dir: Path, base: OccupancyGrid, grid_before: OccupancyGrid, mapper,

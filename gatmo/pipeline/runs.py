@@ -332,7 +332,6 @@ def score(trace: RunTrace, gt: GroundTruth | None, relations=None) -> dict:
     row.update(
         absent=kinds.count("absent"),
         relocated=kinds.count("relocated"),
-        withdrawn=kinds.count("withdrawn"),
         added=kinds.count("added"),
         movable=kinds.count("movable"),
         resets=trace.resets,
@@ -474,7 +473,7 @@ def _overall(rows: list) -> dict:
             vals = [r.get(key) for r in rs if r.get(key) is not None]
             if vals:
                 o[key] = float(max(vals))
-        for key in ("absent", "relocated", "withdrawn", "added"):
+        for key in ("absent", "relocated", "added"):
             o[key] = int(sum(r.get(key, 0) for r in rs))
         out[side] = o
     return out

@@ -21,9 +21,7 @@ from __future__ import annotations
 
 import inspect
 import time
-from collections import deque
 from dataclasses import dataclass, field, replace
-from types import SimpleNamespace
 from typing import Literal
 
 import numpy as np
@@ -47,17 +45,7 @@ class FusionConfig(GatmoModel):
     kidnapping), or AMCL's recovery injects random particles at all (it suspects it is lost; the
     cloud may then drift to a look-alike place without a jump), GATMO waits
     ``settle_after_jump_m`` of travel: a filter that has just locked onto a look-alike place is
-    as confident as one that is right. ``slide_check`` (off; beyond the paper): a filter can
-    also slide onto a look-alike place scan by scan, each step below ``max_offset_jump_m``
-    (hall seed 208, run 2: 1 m off after 15 s, 8 m after 40 s, confident throughout, GATMO
-    handed its poses and adding objects from them); when the filter's pose has moved more than
-    ``slide_max_m`` against odometry over the last ``slide_window_m`` of travel, GATMO waits
-    ``settle_after_jump_m`` as after a jump. On seed 208 that keeps the map clean in run 2
-    and runs 3-4 are kept (ATE 0.37 / 0.44 m against 1.7 / 8.3 m); on tuning seeds 300-319 it
-    is mixed: false relocations 0.61 -> 0.49 per run, but time lost 5.9 % -> 6.3 % and moved
-    pieces found 12.3 % -> 11.4 % (seed 305 kept, 308 lost); 0.8 m over 3 m: false
-    relocations 0.50, found 12.3 %, lost 7.9 %. Off until a test separates a slide from the
-    filter correcting odometry.
+    as confident as one that is right.
 
     ``align_to_map``: GATMO's pose is the published one refined by ICP against the current map.
     An alignment that converges with most points matched but moves the pose by more than
@@ -68,43 +56,15 @@ class FusionConfig(GatmoModel):
     beam-agreement tests still apply), ``skip`` skips the scan (GATMO then saw 20 of 600 scans
     of a simulated rearranged hall). GATMO is told which poses the alignment confirmed
     (``pose_verified``): new objects need scans from such poses
-    (``gatmo.gamma_min_verified_scans``). ``verified_suffices`` (off): a scan the filter is not
-    strictly confident on (between its updates, or its cloud 0.1-0.15 m wide) still goes to
-    GATMO when the alignment confirms the pose. Held-out hall seeds 200-209: the full stack's
-    median ATE ratio to the static localizer 0.36 instead of 0.89 and time lost 4.7 % instead
-    of 10.2 %, but false relocations 1.25 per run instead of 0.53 and moved pieces found 9.4 %
-    instead of 11.7 %: GATMO needs a pose better than the alignment's check guarantees.
+    (``gatmo.gamma_min_verified_scans``).
     The alignment runs at most ``align_max_iter`` Gauss-Newton steps with ``align_kernel``
     weights at ``align_kernel_scale_m``: ``geman_mcclure`` (redescending, as kiss-icp) lets
     furniture moved by less than the 0.3 m correspondence gate drop out instead of pulling the
-    pose towards where it stood. ``align_min_tight_fraction`` (0: no test): a converged alignment
-    also needs this fraction of the scan's points within ``align_tight_m`` of a map edge, else
-    it is inconclusive; a fit that is loose everywhere agrees with the map only roughly.
-
-    ``gatmo_pose_gain`` (1 = off): the pose handed to GATMO follows the matcher's (or, without
-    it, odometry's) increment from the last pose it was handed on the scan before, and moves
-    only this fraction of the way to the scan-to-map alignment's pose: a complementary filter on
-    the alignment's scan-to-scan jitter (1-2 cm, about 1 deg), which smears the chair
-    hypothesis. Beyond the paper. Measured at 0.3 on hall seeds 300-309 it changes little
-    (moved pieces found 12.0 % -> 13.2 %, false relocations 0.70 -> 0.80 per run, time lost
-    5.7 % -> 5.5 %), so it is off. The localizer updates (and is strictly confident) only
-    every ``update_min_d`` of travel, about every third scan in the simulated halls, and this
-    complementary filter restarts after every scan GATMO is not handed: at the gain measured
-    it smoothed nothing. ``gatmo_pose_carry_m`` (0 = restart) carries it across such scans for
-    up to that much travel, unless the localizer jumped. Halls 400-419 at gain 0.2 and 1 m: on
-    seed 400 the poses GATMO is handed in runs 3-4 are off by 2.4-3.1 cm (median) instead of
-    4.9-5.1 cm; moved pieces found 16.1 % -> 18.4 %, but false relocations 1.10 -> 2.25 per
-    seed, the new ones among them doubled too (gain 0.5 on 400-409: found 30 -> 34, false
-    relocations 9 -> 14): off (docs/experiments.md, thirty-first session).
+    pose towards where it stood.
 
     ``mask_unexplained``: returns that land, seen from the pose odometry predicts, where GATMO
     found this run's returns unexplained by the current map (furniture it has not placed yet,
-    people) are withheld from the localizer. Beyond the paper. ``mask_doubted`` (off; needs
-    ``mask_unexplained``) also withholds returns within delta_W of an object GATMO doubts
-    (beams passed through part of it this run): a piece shifted by less than its size
-    returns next to its old place and pulls the filter there. Measured on hall seeds 300-309:
-    time lost 5.7 % -> 5.1 %, moved pieces found 12.0 % -> 11.4 %, false relocations 0.70 ->
-    0.82 per run; off until more seeds separate it from the seed-to-seed swing.
+    people) are withheld from the localizer. Beyond the paper.
     ``mask_withheld`` (off; on in ``sim_stack_config``; needs ``mask_unexplained``) also
     withholds returns within delta_W of an object left out of the localizer's map
     (``gatmo.withhold_unseen_runs``): where such a piece still stands, its returns would land
@@ -121,55 +81,6 @@ class FusionConfig(GatmoModel):
     1.25 per seed, time lost unchanged (7.8 % -> 7.7 %); without the confidence gate time lost
     fell to 6.0 %, but on the Intel log the full stack was then worse than the static
     localizer (0.199 against 0.196 m ATE). See docs/experiments.md.
-
-    ``mask_offset_beams`` (off; needs ``mask_unexplained``) also withholds the returns of
-    an object whose beams miss it (:meth:`gatmo.objects.mapper.GatmoMapper.beams_off_at`,
-    the nudge's test: 30 % of the beams the map expects to end on it end 8 cm or more before
-    or beyond it while the rest of the scan fits the map): a piece shifted or turned by less
-    than its size returns partly inside its old outline, where the median test sees nothing,
-    and the rest of its returns turn the filter. The run's first scan is masked from the
-    localizer's initial pose (``estimate()``) if its covariance passes the paper's reset test
-    (``reset_max_std_*``), and for the first ``mask_offset_beams_reset_test_m`` of travel the
-    reset test gates the mask, afterwards the strict one: the start of a run is where the map
-    is most out of date (everything moved since the last run is still where it stood) and
-    the filter's heading is set. Traced on soak seed 11, run 10: a sofa GATMO placed in run
-    7, shifted 0.8 m and turned since, 2.6 m from the start, turned the filter's first
-    update 12 deg and the robot was lost for the run (5.6 m median error against the static
-    localizer's 0.2 m); with the mask 0.10 m. Always gated by the reset test instead, tuning
-    hall seed 300 was lost (0.08 -> 2.96 m ATE). See docs/experiments.md (ninth session).
-
-    ``coast_withheld_fraction`` (0: off; needs ``mask_unexplained``; beyond the paper): a
-    scan of which the masks withheld at least this fraction of the returns reaches the
-    localizer empty, and its particles move on odometry alone, for at most ``coast_max_m`` of
-    travel in a row; meanwhile GATMO still counts the scan's unexplained returns from that
-    pose (:meth:`gatmo.objects.mapper.GatmoMapper.note_unexplained`), so the masks keep up.
-    Where everything in view has moved (the demo's run 4: a box and a lounge chair shifted,
-    nothing else within the 4 m laser's reach), the few returns left fit an alignment of old
-    and new furniture and the filter slides along the path; an up-to-date map of the last
-    run's layout does not prevent it (the static localizer on it: 1.0 m ATE). Off: on tuning
-    hall seeds 300-319 it changes the full stack's mean ATE 0.150 -> 0.162 m at 0.6 (0.149 m
-    at 0.7, with 4 more false relocations); seed 301 is lost at 0.5 (3.6 m); and the demo's
-    run 4 replayed with the compare's filter seed stays lost: coasting holds the filter for
-    1.4 m, then returns the masks do not know yet pull it (docs/experiments.md, twenty-first
-    session).
-
-    ``bridge_evidence`` (beyond the paper): the scans between two poses GATMO was handed as
-    confirmed (``pose_verified``) that it was not, or only unconfirmed, are kept; when the
-    second confirmed pose comes and the matcher's (or, without it, odometry's) increments carry
-    the first onto it within ``bridge_max_closure_m`` / ``bridge_max_closure_deg``, over at
-    most ``bridge_max_travel_m``, those scans are placed along that chain (the closing error
-    spread in proportion) and handed to GATMO as evidence of absence only
-    (:meth:`gatmo.objects.mapper.GatmoMapper.bridged`). GATMO takes a ray as evidence only
-    from a confirmed pose, and about a tenth of a run's scans are; the soak's stale objects
-    were seen through from the true poses, but from none of those scans, in 23-32 % of
-    cases. Off: it hands GATMO 2-3 times the scans (soak seeds 11 and 12, 50 runs: 895 ->
-    2,058 and 856 -> 2,203), and objects left stale at a run's start fall (845 -> 661 and
-    916 -> 821 object-runs; after run 50, 25 and 27 objects placed for 30 and 28 things
-    standing, against 32 and 38), but the halls notice no more pieces gone (hall seeds
-    100-112 and 400-411: 127 -> 124 and 124 -> 128), find fewer (41 -> 36 and 32 -> 31), and
-    seeds 105 and 408 are lost where they were not (ATE 0.15 -> 3.05 m, 0.21 -> 2.15 m); soak
-    seed 11's time lost over runs 11-50 is 47 % instead of 27 % (seed 12: 35 % instead of 38
-    %). docs/experiments.md, eighteenth session.
 
     ``publish_pose``: the pose the stack reports. ``aligned`` (default; needs GATMO and
     ``align_to_map``): the pose the scan-to-map alignment confirmed on the last scan it
@@ -191,18 +102,6 @@ class FusionConfig(GatmoModel):
     (paper, Sec. IV-B), locally more precise (Intel relations 0.052 m / 0.65 deg against
     0.061 m / 0.94 deg) but with larger errors between resets (ATE 7-11 % higher in
     simulated offices where nothing moved).
-
-    ``align_chain_check`` (off; beyond the paper): a pose the alignment confirmed must also
-    agree with the last one it accepted, carried by the base's locally precise motion (the
-    scan matcher's, else the wheels'), within ``align_chain_tol_m`` plus
-    ``align_chain_tol_per_m`` of the travel between them (and ``align_chain_tol_deg`` plus
-    ``align_chain_tol_deg_per_m`` per metre). In a rearranged hall a tenth of the confirmed
-    poses are 0.1-0.35 m off: the few pieces in a 4 m laser's view had been shifted and the
-    alignment put the robot where they fit. Such a pose jumps 10-30 cm against odometry within
-    a few scans, which the truth never does. A pose that disagrees is ``inconsistent`` and GATMO
-    skips the scan; ``align_chain_switch_scans`` such poses in a row that agree among
-    themselves are accepted and carry the chain on (the old one was the wrong one), and a chain
-    older than ``align_chain_stale_m`` of travel is dropped (odometry drifts).
 
     ``relocalize`` (off by default; on in the simulated halls' configuration,
     ``gatmo.pipeline.config.sim_stack_config``, since the twenty-fifth session; needs GATMO's
@@ -263,13 +162,6 @@ class FusionConfig(GatmoModel):
     offset_gain: float = 1.0
     max_travel_without_reset_m: float = 1.0
     settle_after_jump_m: float = 3.0
-    #: travel [m] at a run's start before GATMO takes poses: the filter's first updates from
-    #: the initial cloud can settle confidently 0.2 m off (hall seed 416, run 3: a column marked
-    #: absent at the 8th scan); 0: from the first scan (the paper)
-    settle_after_start_m: float = Field(0.0, ge=0)
-    slide_check: bool = False
-    slide_window_m: float = Field(2.0, gt=0)
-    slide_max_m: float = Field(0.4, gt=0)
     align_to_map: bool = True
     align_min_fitness: float = 0.6
     align_max_correction_m: float = 0.15
@@ -279,33 +171,9 @@ class FusionConfig(GatmoModel):
     align_kernel_scale_m: float = Field(0.05, gt=0)
     align_max_iter: int = Field(15, ge=1)
     align_tight_m: float = Field(0.05, gt=0)
-    align_min_tight_fraction: float = Field(0.0, ge=0, le=1)
-    align_chain_check: bool = False
-    align_chain_tol_m: float = Field(0.04, gt=0)
-    align_chain_tol_per_m: float = Field(0.05, ge=0)
-    align_chain_tol_deg: float = Field(2.0, gt=0)
-    align_chain_tol_deg_per_m: float = Field(1.0, ge=0)
-    align_chain_stale_m: float = Field(2.0, gt=0)
-    align_chain_switch_scans: int = Field(5, ge=1)
-    verified_suffices: bool = False
-    verified_track: bool = True
     mask_unexplained: bool = True
-    mask_doubted: bool = False
     mask_withheld: bool = False
     mask_offset_objects: bool = True
-    mask_offset_beams: bool = False
-    mask_offset_beams_reset_test_m: float = Field(3.0, ge=0)
-    coast_withheld_fraction: float = Field(0.0, ge=0, le=1)
-    coast_max_m: float = Field(3.0, gt=0)
-    gatmo_pose_gain: float = Field(1.0, gt=0, le=1)
-    gatmo_pose_carry_m: float = Field(0.0, ge=0)
-    motion_from_matcher: bool = False
-    matcher_motion_max_gap_m: float = Field(0.2, gt=0)
-    matcher_motion_max_gap_deg: float = Field(10.0, gt=0)
-    bridge_evidence: bool = False
-    bridge_max_closure_m: float = Field(0.02, gt=0)
-    bridge_max_closure_deg: float = Field(1.0, gt=0)
-    bridge_max_travel_m: float = Field(3.0, gt=0)
     relocalize: bool = False
     relocalize_below_fit: float = Field(0.3, ge=0, le=1)
     relocalize_min_fit: float = Field(0.5, ge=0, le=1)
@@ -337,11 +205,9 @@ class FusionConfig(GatmoModel):
 #: what a scan-to-map alignment (:meth:`MapAligner.refine`) concluded: ``confirmed`` the pose;
 #: ``contradicts`` it (converged, matched, but corrects it more than ``align_max_correction_*``);
 #: inconclusive: ``not_converged`` (within ``align_max_iter``), ``degenerate``, ``low_fitness``
-#: (below ``align_min_fitness``), ``loose`` (below ``align_min_tight_fraction``),
-#: ``few_points`` (under 20 after downsampling) or ``no_map``; ``inconsistent``: confirmed,
-#: but against the confirmed poses before it (``align_chain_check``, :class:`AlignmentChain`)
+#: (below ``align_min_fitness``), ``few_points`` (under 20 after downsampling) or ``no_map``
 ALIGN_OUTCOMES = ("confirmed", "contradicts", "not_converged", "degenerate", "low_fitness",
-                  "loose", "few_points", "no_map", "inconsistent")
+                  "few_points", "no_map")
 
 
 def _edge_points(grid: OccupancyGrid) -> np.ndarray:
@@ -404,71 +270,19 @@ class MapAligner:
         res = icp_2d(pts, self._pts, pose_xytheta, target_tree=self._tree,
                      target_normals=self._normals, max_corr_dist_m=0.3, max_iter=f.align_max_iter,
                      kernel=f.align_kernel, kernel_scale_m=f.align_kernel_scale_m)
-        self.last_outcome = ("not_converged" if not res.converged else "degenerate"
-                             if res.degenerate else "low_fitness"
-                             if res.fitness < f.align_min_fitness else "loose")
         if not res.converged or res.degenerate or res.fitness < f.align_min_fitness:
+            self.last_outcome = ("not_converged" if not res.converged else "degenerate"
+                                 if res.degenerate else "low_fitness")
             return inconclusive
         d, _ = self._tree.query(transform_points(res.T_target_source, pts),
                                 distance_upper_bound=f.align_tight_m)
         self.last_tight_fraction = float(np.mean(np.isfinite(d)))
-        if self.last_tight_fraction < f.align_min_tight_fraction:
-            return inconclusive
         corr = relative(pose_xytheta, res.T_target_source)
         ok = (np.hypot(corr[0], corr[1]) <= f.align_max_correction_m
               and abs(corr[2]) <= np.radians(f.align_max_correction_deg))
         self.last_verified = bool(ok)
         self.last_outcome = "confirmed" if ok else "contradicts"
         return (res.T_target_source if ok else pose_xytheta), bool(ok)
-
-
-class AlignmentChain:
-    """``align_chain_check``: confirmed poses (map frame, (3,) [m, m, rad]) checked against
-    each other through the base's motion between them (``ref``: the base pose in a locally
-    precise frame, odometry or the scan matcher's; ``travel_m``: the distance driven so far)."""
-
-    def __init__(self, tol_m: float, tol_per_m: float, tol_deg: float, tol_deg_per_m: float,
-                 stale_m: float, switch_scans: int):
-        self.tol_m, self.tol_per_m = tol_m, tol_per_m
-        self.tol_rad, self.tol_rad_per_m = np.radians(tol_deg), np.radians(tol_deg_per_m)
-        self.stale_m, self.switch_scans = stale_m, switch_scans
-        self.reset()
-
-    @classmethod
-    def from_config(cls, f: FusionConfig) -> AlignmentChain:
-        return cls(f.align_chain_tol_m, f.align_chain_tol_per_m, f.align_chain_tol_deg,
-                   f.align_chain_tol_deg_per_m, f.align_chain_stale_m,
-                   f.align_chain_switch_scans)
-
-    def reset(self) -> None:
-        self._last: tuple[np.ndarray, np.ndarray, float] | None = None  # (pose, ref, travel)
-        self._suspects: list[tuple[np.ndarray, np.ndarray, float]] = []
-        self.n_rejected = 0
-
-    def _agrees(self, a: tuple, pose: np.ndarray, ref: np.ndarray, travel_m: float) -> bool:
-        a_pose, a_ref, a_travel = a
-        d_m = max(0.0, travel_m - a_travel)
-        carried = compose(a_pose, relative(a_ref, ref))
-        gap = relative(carried, pose)
-        return bool(np.hypot(gap[0], gap[1]) <= self.tol_m + self.tol_per_m * d_m
-                    and abs(gap[2]) <= self.tol_rad + self.tol_rad_per_m * d_m)
-
-    def accept(self, pose_xytheta, ref_xytheta, travel_m: float) -> bool:
-        """True if the confirmed pose agrees with the chain (and carries it on)."""
-        entry = (np.asarray(pose_xytheta, dtype=float).copy(),
-                 np.asarray(ref_xytheta, dtype=float).copy(), float(travel_m))
-        if (self._last is None or travel_m - self._last[2] > self.stale_m
-                or self._agrees(self._last, *entry)):
-            self._last, self._suspects = entry, []
-            return True
-        if self._suspects and not self._agrees(self._suspects[-1], *entry):
-            self._suspects = []
-        self._suspects.append(entry)
-        if len(self._suspects) >= self.switch_scans:
-            self._last, self._suspects = entry, []  # they agree among themselves: the old
-            return True  # chain was the wrong one
-        self.n_rejected += 1
-        return False
 
 
 class Relocalizer:
@@ -621,24 +435,12 @@ class LocalizationStack:
         self.n_scans = 0
         self.n_map_updates = 0
         self.n_masked = 0  # returns withheld from the localizer (mask_unexplained)
-        self.n_matcher_motion_rejected = 0  # matcher increments replaced by the wheels'
         self._aligner: MapAligner | None = None
-        self._chain = AlignmentChain.from_config(self.fusion)
         self._last_loc: np.ndarray | None = None
         self._last_odom: np.ndarray | None = None
-        self._motion: tuple | None = None
         self._last_precise = False  # the last estimate passed GATMO's strict confidence test
-        self._last_confident = False  # ... the paper's reset test (mask_offset_beams)
-        self._start: np.ndarray | None = None  # the initial pose the first scan is masked from
         self._settle_left_m = 0.0
         self._injected_seen = 0  # the localizer's random particles counted so far
-        self._gatmo_last: tuple[np.ndarray, np.ndarray] | None = None  # (pose, base_ref)
-        # bridge_evidence: the last confirmed (pose handed to GATMO, base_ref), and the scans
-        # since then as (scan, base_ref, handed unconfirmed), with the travel they span [m]
-        self._anchor: tuple[np.ndarray, np.ndarray] | None = None
-        self._bridge: list[tuple[Scan, np.ndarray, bool]] = []
-        self._bridge_travel_m = 0.0
-        self.n_bridged = 0  # scans handed to GATMO through a bridge
         # a localizer without the ``withheld`` argument (an older stand-in) gets the masked
         # scan alone
         try:
@@ -647,8 +449,6 @@ class LocalizationStack:
                 p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
         except (TypeError, ValueError):  # no update (a stand-in stepped otherwise)
             self._takes_withheld = False
-        self._coast_m = 0.0  # coast_withheld_fraction: travel coasted in a row [m]
-        self.n_coasted = 0
         # publish_pose aligned: the last confirmed (map pose, odometry pose) it is carried from
         self._published_anchor: tuple[np.ndarray, np.ndarray] | None = None
         # relocalize: the search (rebuilt when the map changed), the last found pose with the
@@ -667,29 +467,13 @@ class LocalizationStack:
         self._travel_since_reset_m = np.inf
         self._last_pose = None
         self._last_loc = self._last_odom = None
-        self._motion = None  # (odometry chain, matcher pose, wheel odometry) of the last scan
-        self._last_precise = self._last_confident = False
-        # the localizer's estimate before the run's first scan (its initial pose), from which
-        # the first scan is masked (mask_offset_beams): the first update is where a piece
-        # moved since the map was made turns the filter
-        self._start = None
-        estimate = getattr(self.localizer, "estimate", None)
-        if self.fusion.mask_offset_beams and callable(estimate):
-            pose0, cov0 = estimate()
-            if is_confident(SimpleNamespace(cov=cov0), self.fusion):
-                self._start = np.asarray(pose0, dtype=float)
-        self._settle_left_m = self.fusion.settle_after_start_m
-        self._coast_m = 0.0
-        self._gatmo_last = None
-        self._anchor, self._bridge, self._bridge_travel_m = None, [], 0.0
+        self._last_precise = False
+        self._settle_left_m = 0.0
         self._published_anchor = None
-        self._chain.reset()
         self._reloc_found = None
         self._reloc_stale = True
         self._reloc_odom, self._reloc_travel_m = None, 0.0
         self._injected_seen = _injected(self.localizer)
-        self._slide: deque = deque()  # (travel m, filter pose, odometry) over slide_window_m
-        self._travel_m = 0.0
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
@@ -707,36 +491,15 @@ class LocalizationStack:
         """The map the localizer, the alignment and the relocalizer use."""
         return self.loc_grid if self.loc_grid is not None else self.mapper.grid()
 
-    def _slid(self, loc_pose: np.ndarray, odom: np.ndarray) -> bool:
-        """The filter's pose moved more than ``slide_max_m`` against odometry since the newest
-        sample at least ``slide_window_m`` of travel back."""
-        q = self._slide
-        if not q or self._travel_m - q[-1][0] >= 0.05:  # a sample per 5 cm: bounded when still
-            q.append((self._travel_m, loc_pose, odom))
-        while len(q) > 1 and self._travel_m - q[1][0] >= self.fusion.slide_window_m:
-            q.popleft()
-        travel0, loc0, odom0 = q[0]
-        if self._travel_m - travel0 < self.fusion.slide_window_m:
-            return False  # not a whole window yet
-        d = relative(compose(loc0, relative(odom0, odom)), loc_pose)
-        return bool(np.hypot(d[0], d[1]) > self.fusion.slide_max_m)
-
     def step(self, scan: Scan) -> StackStep:
         """Process one scan; see the module docstring for the order of work."""
         t0 = time.perf_counter()
         match = self.matcher.register(scan) if self.matcher is not None else None
-        if match is not None and self.fusion.motion_from_matcher:
-            scan = self._with_matcher_motion(scan, np.asarray(match.pose_xytheta, dtype=float))
         masked, withheld = self._masked(scan)
-        coasting = self._coasting(scan, masked, withheld)
-        if coasting is not None:
-            masked = coasting
         if self._takes_withheld:
             est = self.localizer.update(scan.odom_pose_xytheta, masked, withheld=withheld)
         else:
             est = self.localizer.update(scan.odom_pose_xytheta, masked)
-        if coasting is not None and self.mapper is not None:
-            self.mapper.note_unexplained(est.pose_xytheta, scan)
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)
         confident = is_confident(est, self.fusion)
         odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
@@ -747,9 +510,6 @@ class LocalizationStack:
             jump = relative(compose(self._last_loc, d_odom), loc_pose)
             if np.hypot(jump[0], jump[1]) > self.fusion.max_offset_jump_m:
                 self._settle_left_m = self.fusion.settle_after_jump_m
-            self._travel_m += float(np.hypot(*d_odom[:2]))
-        if self.fusion.slide_check and self._slid(loc_pose, odom):
-            self._settle_left_m = self.fusion.settle_after_jump_m
         # AMCL's recovery injected random particles: the scans fit the filter's own cloud
         # poorly, so it suspects it is lost, and whatever it settles on next is a guess
         injected = _injected(self.localizer)
@@ -773,16 +533,12 @@ class LocalizationStack:
                 self._settle_left_m = self.fusion.settle_after_jump_m
                 self.T_map_match = None  # the matcher is re-anchored on the new pose
                 self._published_anchor = None
-                self._chain.reset()
         self._last_loc, self._last_odom = loc_pose, odom
         self._last_precise = is_confident(est, self.fusion, strict=True, require_update=False)
-        self._last_confident = is_confident(est, self.fusion, require_update=False)
         reset = False
         pose = loc_pose
-        base_ref = odom  # where the base is in a locally precise frame (odometry, or ICP's)
         if match is not None:
             T_match_base = np.asarray(match.pose_xytheta, dtype=float)
-            base_ref = T_match_base
             if self.T_map_match is None or confident:
                 # the paper's reset: the matcher's frame is re-anchored on the filter's estimate;
                 # offset_gain < 1 moves it only part of the way (a complementary filter: the
@@ -832,7 +588,6 @@ class LocalizationStack:
             pose_ok = pose_ok and self._settle_left_m <= 0.0
             map_pose = pose
             verified = pose_ok
-            track = True
             if self.fusion.align_to_map and self._aligner is None:
                 self._aligner = MapAligner(self.fusion)
                 self._aligner.set_grid(self._map_grid())
@@ -840,32 +595,10 @@ class LocalizationStack:
                 map_pose, pose_ok = self._aligner.refine(pose, scan)
                 verified = self._aligner.last_verified
                 align_outcome = self._aligner.last_outcome
-                if verified and not self._chain_agrees(map_pose, base_ref):
-                    map_pose, pose_ok, verified = pose, False, False
-                    align_outcome = "inconsistent"
-            elif (self.fusion.verified_suffices and self.fusion.align_to_map
-                  and self._settle_left_m <= 0.0
-                  and is_confident(est, self.fusion, require_update=False)):
-                # between the filter's strictly confident updates: the scan-to-map alignment
-                # alone vouches for the pose
-                refined, _ = self._aligner.refine(pose, scan)
-                align_outcome = self._aligner.last_outcome
-                if self._aligner.last_verified and not self._chain_agrees(refined, base_ref):
-                    align_outcome = "inconsistent"
-                elif self._aligner.last_verified:
-                    map_pose, pose_ok, verified = refined, True, True
-                    track = self.fusion.verified_track
             if pose_ok:
-                map_pose = gatmo_pose = self._smoothed(np.asarray(map_pose, dtype=float),
-                                                       base_ref)
-            elif self.fusion.gatmo_pose_carry_m <= 0.0 or self._settle_left_m > 0.0:
-                self._gatmo_last = None
+                map_pose = gatmo_pose = np.array(map_pose, dtype=float)
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
-                                        stamp_s=scan.stamp_s, pose_verified=verified,
-                                        track=track)
-            if self.fusion.bridge_evidence:
-                events = events + self._bridge_step(scan, base_ref, gatmo_pose,
-                                                    pose_ok and verified)
+                                        stamp_s=scan.stamp_s, pose_verified=verified)
             changed = self._apply_map_changes()
             if changed and self._aligner is not None:
                 self._aligner.set_grid(self._map_grid())
@@ -893,118 +626,6 @@ class LocalizationStack:
             align_outcome=align_outcome,
             relocalized=relocalized,
         )
-
-    def _chain_agrees(self, confirmed: np.ndarray, base_ref: np.ndarray) -> bool:
-        """``align_chain_check``: the confirmed pose agrees with those before it (always True
-        with the check off)."""
-        if not self.fusion.align_chain_check:
-            return True
-        return self._chain.accept(confirmed, base_ref, self._travel_m)
-
-    def _bridge_step(self, scan: Scan, base_ref: np.ndarray, gatmo_pose: np.ndarray | None,
-                     confirmed: bool) -> list:
-        """``bridge_evidence``: keep this scan, or close the bridge on its confirmed pose and
-        hand the kept scans to GATMO (see :class:`FusionConfig`). Returns GATMO's events."""
-        f = self.fusion
-        ref = np.asarray(base_ref, dtype=float)
-        if self._bridge or self._anchor is not None:
-            last = self._bridge[-1][1] if self._bridge else self._anchor[1]
-            self._bridge_travel_m += float(np.hypot(*relative(last, ref)[:2]))
-        if not confirmed:
-            if self._anchor is not None:
-                if self._bridge_travel_m > f.bridge_max_travel_m:
-                    self._anchor, self._bridge = None, []  # too long: the chain drifts
-                else:
-                    self._bridge.append((scan, ref.copy(), gatmo_pose is not None))
-            return []
-        events: list = []
-        if self._anchor is not None and self._bridge:
-            pose0, ref0 = self._anchor
-            err = relative(compose(pose0, relative(ref0, ref)), gatmo_pose)
-            err[2] = float(wrap_angle(err[2]))
-            if (np.hypot(err[0], err[1]) <= f.bridge_max_closure_m
-                    and abs(err[2]) <= np.radians(f.bridge_max_closure_deg)):
-                refs = [ref0] + [b[1] for b in self._bridge] + [ref]
-                steps = np.hypot(*np.diff(np.array(refs)[:, :2], axis=0).T)
-                along = np.cumsum(steps) / max(float(steps.sum()), 1e-9)
-                for (old, ref_i, handed), s_i in zip(self._bridge, along, strict=False):
-                    pose_i = compose(compose(pose0, relative(ref0, ref_i)), err * s_i)
-                    events += self.mapper.bridged(pose_i, old, stamp_s=scan.stamp_s,
-                                                  hits_counted=handed)
-                    self.n_bridged += 1
-        self._anchor = (np.asarray(gatmo_pose, dtype=float).copy(), ref.copy())
-        self._bridge, self._bridge_travel_m = [], 0.0
-        return events
-
-    def _with_matcher_motion(self, scan: Scan, T_match_base: np.ndarray) -> Scan:
-        """``scan`` with its odometry replaced by a chain of the scan matcher's increments
-        (``motion_from_matcher``), each checked against the wheels' increment: one that
-        differs by more than ``matcher_motion_max_gap_m`` / ``_deg`` (the matcher slipped on
-        a scan full of people) is replaced by the wheels' own."""
-        wheels = np.asarray(scan.odom_pose_xytheta, dtype=float)
-        if self._motion is None:
-            chain = wheels.copy()
-        else:
-            last_chain, last_match, last_wheels = self._motion
-            inc = relative(last_match, T_match_base)
-            inc_w = relative(last_wheels, wheels)
-            gap = inc - inc_w
-            f = self.fusion
-            if (np.hypot(gap[0], gap[1]) > f.matcher_motion_max_gap_m
-                    or abs(wrap_angle(gap[2])) > np.radians(f.matcher_motion_max_gap_deg)):
-                inc = inc_w
-                self.n_matcher_motion_rejected += 1
-            chain = compose(last_chain, inc)
-        self._motion = (chain, T_match_base.copy(), wheels)
-        return replace(scan, odom_pose_xytheta=chain)
-
-    def _smoothed(self, map_pose: np.ndarray, base_ref: np.ndarray) -> np.ndarray:
-        """The pose handed to GATMO (``gatmo_pose_gain``): the last one carried by the local
-        increment, moved ``gain`` of the way to ``map_pose``. Restarts after a scan GATMO was
-        not handed (with ``gatmo_pose_carry_m``, only after a jump of the filter or more than
-        that much travel since the last pose handed), and where the two disagree by more than
-        the alignment may correct."""
-        g = self.fusion.gatmo_pose_gain
-        out = np.array(map_pose, dtype=float)
-        pred = None
-        if g < 1.0 and self._gatmo_last is not None:
-            last_pose, last_ref = self._gatmo_last
-            inc = relative(last_ref, base_ref)
-            carry = self.fusion.gatmo_pose_carry_m
-            # carried too far on the local increment alone (its drift grows): restart
-            if not 0.0 < carry < np.hypot(inc[0], inc[1]):
-                pred = compose(last_pose, inc)
-        if pred is not None:
-            d = relative(pred, map_pose)
-            d[2] = float(wrap_angle(d[2]))
-            if (np.hypot(d[0], d[1]) <= self.fusion.align_max_correction_m
-                    and abs(d[2]) <= np.radians(self.fusion.align_max_correction_deg)):
-                out = compose(pred, d * g)
-                out[2] = float(wrap_angle(out[2]))
-        self._gatmo_last = (out.copy(), np.asarray(base_ref, dtype=float).copy())
-        return out
-
-    def _coasting(self, scan: Scan, masked: Scan, withheld: np.ndarray | None) -> Scan | None:
-        """``coast_withheld_fraction``: a scan of which GATMO's evidence withheld at least this
-        fraction of the returns is handed to the localizer empty (its particles move on
-        odometry alone), for at most ``coast_max_m`` of travel in a row."""
-        f = self.fusion
-        odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
-        step = 0.0 if self._last_odom is None else float(
-            np.hypot(*relative(self._last_odom, odom)[:2]))
-        if f.coast_withheld_fraction <= 0.0 or withheld is None:
-            self._coast_m = 0.0
-            return None
-        n_with = int(np.count_nonzero(withheld))
-        n_kept = int(np.count_nonzero(masked.valid))
-        if n_with < f.coast_withheld_fraction * (n_with + n_kept):
-            self._coast_m = 0.0
-            return None
-        if self._coast_m >= f.coast_max_m:  # the stretch stays weighed until it ends
-            return None
-        self._coast_m += step
-        self.n_coasted += 1
-        return replace(masked, ranges_m=np.full_like(masked.ranges_m, np.nan))
 
     def _relocalized(self, scan: Scan, loc_pose: np.ndarray,
                      odom: np.ndarray) -> np.ndarray | None:
@@ -1067,15 +688,10 @@ class LocalizationStack:
         unexplained_at = getattr(self.mapper, "unexplained_at", None)
         if unexplained_at is None or not self.fusion.mask_unexplained:
             return scan, None
-        if self._last_loc is not None:
-            odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
-            pred = compose(self._last_loc, relative(self._last_odom, odom))
-            early = self._travel_m < self.fusion.mask_offset_beams_reset_test_m
-            confident = self._last_confident if early else self._last_precise
-        elif self._start is not None:  # the run's first scan, from the initial pose
-            pred, confident = self._start, True
-        else:
+        if self._last_loc is None:
             return scan, None
+        odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
+        pred = compose(self._last_loc, relative(self._last_odom, odom))
         lp = compose(pred, scan.laser_pose_xytheta)
         valid = scan.valid
         if not valid.any():
@@ -1084,14 +700,10 @@ class LocalizationStack:
         r = scan.ranges_m[valid]
         pts = lp[:2] + r[:, None] * np.stack([np.cos(a), np.sin(a)], axis=1)
         bad = unexplained_at(pts)
-        if self.fusion.mask_doubted:
-            bad |= self.mapper.doubted_at(pts)
         if self.fusion.mask_withheld:
             bad |= self.mapper.withheld_at(pts)
         if self.fusion.mask_offset_objects and self._last_precise:
             bad |= self.mapper.offset_at(pts)
-        if self.fusion.mask_offset_beams and confident:
-            bad |= self.mapper.beams_off_at(lp, scan)
         self.n_masked += int(bad.sum())
         if not bad.any():
             return scan, None
