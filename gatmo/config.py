@@ -8,20 +8,49 @@ model and any problem into a :class:`~gatmo.errors.ConfigError` naming file, lin
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 
 from gatmo.errors import ConfigError, FormatError
 
 M = TypeVar("M", bound=BaseModel)
 
 
+#: options removed from a model, by name: the value each had by default (see
+#: :attr:`GatmoModel.removed_options`)
+_REMOVED: dict[str, Any] = {}
+
+
+def _same(value: Any, default: Any) -> bool:
+    """``value`` is ``default`` as YAML writes it (1 and 1.0 alike, but not True and 1)."""
+    return isinstance(value, bool) == isinstance(default, bool) and value == default
+
+
 class GatmoModel(BaseModel):
-    """Base of every config model: unknown keys are errors, assignments are validated."""
+    """Base of every config model: unknown keys are errors, assignments are validated.
+
+    ``removed_options`` (name -> the value it had by default): options a later version dropped.
+    A file naming one at that value (a ``config.yaml`` an earlier run wrote, every field
+    written out) still loads, the key ignored; at any other value it is refused as a removed
+    option, as the behaviour it asked for is gone."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    removed_options: ClassVar[dict[str, Any]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        _REMOVED.update(cls.__dict__.get("removed_options", {}))
+
+    @model_validator(mode="before")
+    @classmethod
+    def _ignore_removed_at_their_defaults(cls, data: Any) -> Any:
+        gone = cls.removed_options
+        if gone and isinstance(data, dict):
+            data = {k: v for k, v in data.items()
+                    if not (k in gone and _same(v, gone[k]))}
+        return data
 
 
 def yaml_key_lines(text: str) -> dict[tuple, int]:
@@ -92,7 +121,10 @@ def validation_to_config_error(
         user_loc = tuple(key_names.get(str(p), p) if key_names else p for p in loc)
         line = lines.get(prefix + user_loc) or lines.get(prefix + loc[:1])
     msg = err.get("msg", "invalid value")
-    if err.get("type") == "extra_forbidden":
+    if err.get("type") == "extra_forbidden" and names and names[-1] in _REMOVED:
+        msg = (f"removed option (docs/experiments.md): only the value it had by default, "
+               f"{_REMOVED[names[-1]]!r}, is still accepted (got {err.get('input')!r})")
+    elif err.get("type") == "extra_forbidden":
         msg = "unknown key"
     elif "input" in err and err.get("type") != "missing":
         msg = f"{msg} (got {err['input']!r})"
