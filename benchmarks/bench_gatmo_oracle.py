@@ -98,7 +98,8 @@ def stack_poses(scen, cfg, tmp: Path) -> list[tuple[np.ndarray, np.ndarray]]:
 def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
              overrides: list[str] | None = None,
              pose_noise: tuple[float, float] | None = None,
-             pose_source: str = "truth", band: str = "all") -> list[dict]:
+             pose_source: str = "truth", band: str = "all",
+             sim_overrides: list[str] | None = None) -> list[dict]:
     from benchmarks._overrides import with_overrides
     from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.geometry import wrap_angle
@@ -108,7 +109,7 @@ def one_seed(seed: int, runs: int, tmp: Path, return_prob: float = 0.0,
     from gatmo.pipeline.evaluate import object_state, observed, piece_outcome, tie_objects
     from gatmo.pipeline.runs import load_scans
 
-    sim = SimConfig.for_preset("hall")
+    sim = with_overrides(SimConfig.for_preset("hall"), sim_overrides)
     sim.rearrange.return_prob = return_prob
     scen = simulate_scenario(tmp / f"s{seed}", preset="hall", runs=runs, seed=seed, config=sim)
     doc = json.loads(Path(scen.scenario_json).read_text())
@@ -188,7 +189,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         job = partial(one_seed, runs=args.runs, tmp=Path(tmp), return_prob=args.return_prob,
                       overrides=args.set, pose_noise=noise, pose_source=args.pose_source,
-                      band=args.error_band)
+                      band=args.error_band, sim_overrides=args.sim_set)
         with ProcessPoolExecutor(args.procs) as ex:
             for seed, r in zip(seeds, ex.map(job, seeds), strict=True):
                 rows += r

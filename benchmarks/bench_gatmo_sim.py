@@ -37,11 +37,13 @@ def stack_config(overrides: list[str] | None = None):
 
 
 def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None = None,
-             overrides: list[str] | None = None, before: bool = True) -> dict:
+             overrides: list[str] | None = None, before: bool = True,
+             sim_overrides: list[str] | None = None) -> dict:
+    from benchmarks._overrides import with_overrides
     from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.pipeline.runs import compare
 
-    sim = SimConfig.for_preset(preset)
+    sim = with_overrides(SimConfig.for_preset(preset), sim_overrides)
     if seconds is not None:
         sim.robot.duration_s = seconds
     scen = simulate_scenario(tmp / f"s{seed}", preset=preset, runs=runs, seed=seed, config=sim)
@@ -56,7 +58,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
     # walk), a relocation, an absence or an object added
     before_changes = dict.fromkeys(("relocated", "absent", "added"), float("nan"))
     if before:  # the same world before anything moved: same seed, no rearrangement
-        still = SimConfig.for_preset(preset)
+        still = with_overrides(SimConfig.for_preset(preset), sim_overrides)
         still.robot.duration_s = sim.robot.duration_s
         r = still.rearrange
         r.move_prob = r.shift_prob = r.remove_prob = 0.0
@@ -317,7 +319,8 @@ def main(argv=None) -> int:
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     with tempfile.TemporaryDirectory() as tmp:
         job = partial(one_seed, preset=args.preset, runs=args.runs, tmp=Path(tmp),
-                      seconds=args.seconds, overrides=args.set, before=not args.no_before)
+                      seconds=args.seconds, overrides=args.set, before=not args.no_before,
+                      sim_overrides=args.sim_set)
         with ProcessPoolExecutor(args.procs) as ex:
             for row in ex.map(job, seeds):
                 rows.append(row)
@@ -325,6 +328,7 @@ def main(argv=None) -> int:
                                for k, v in row.items() if k != "outcomes"), flush=True)
     total = summarize(rows, preset=args.preset, runs=args.runs, overrides=args.set,
                       before=not args.no_before)
+    total["sim_overrides"] = args.sim_set
     print(json.dumps(total, indent=1))
     OUT.mkdir(exist_ok=True)
     (OUT / f"gatmo_sim_{args.preset}{args.tag}.json").write_text(json.dumps({"rows": rows,

@@ -182,6 +182,8 @@ class GatmoMapper:
         # their returns per scan this run (their tracks' Metaobject.scan_points), for the
         # extent test
         self._gamma_points: dict[int, list] = {}
+        # per Gamma object seen this run, its tracks' nearest view [m] (Metaobject.nearest_view_m)
+        self._gamma_near: dict[int, float] = {}
         # per (object id, test): how often a chair was refused as this object this run
         self.refusals: dict[tuple[int, str], int] = {}
         # and where the refused chairs were: (object id, test) -> their centres (x, y) [m],
@@ -348,6 +350,7 @@ class GatmoMapper:
         self._reset_run_evidence()
         # "seen this run": a Gamma object's scans of a run before saw another layout
         self._gamma_points.clear()
+        self._gamma_near.clear()
         self._run_open = True
 
     def end_run(self) -> list[Event]:
@@ -1066,15 +1069,18 @@ class GatmoMapper:
         touched = []
         for mid, zs in assigned.items():
             m = by_id[mid]
-            m.update(np.vstack(zs), stamp_s, verified=verified)
+            z = np.vstack(zs)
+            m.update(z, stamp_s, verified=verified)
             if self._view is not None:
                 m.add_view(self._view)
+                self._note_range(m, z)
             touched.append(m)
         for z in fresh:
             m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m,
                            verified=verified)
             if self._view is not None:
                 m.add_view(self._view)
+                self._note_range(m, z)
             self._next_meta += 1
             self._meta.append(m)
         self._merge_metaobjects()
@@ -1084,6 +1090,12 @@ class GatmoMapper:
             if (m.matched_object is None and m.n_obs >= c.chair_min_scans
                     and m.n_obs % 3 == 0 and m.dominant() == "chair"):
                 self._try_match(m, stamp_s, events)
+
+    def _note_range(self, m: Metaobject, points_xy: np.ndarray) -> None:
+        """Keep the nearest view of track ``m``: the median range [m] of ``points_xy`` (its
+        returns in this scan, map frame) from the laser of the current view."""
+        r = float(np.median(np.hypot(*(points_xy - self._view[0][:2]).T)))
+        m.nearest_view_m = min(m.nearest_view_m, r)
 
     def _merge_metaobjects(self) -> None:
         """Chair-like metaobjects whose evidence grids touch are one object seen in parts."""
@@ -1206,6 +1218,9 @@ class GatmoMapper:
         # a speck: only a shift nearby
         if not self._distinctive(o) and self._far(o, mt):
             return "far"
+        # across the room, only a chair seen from near enough to tell look-alikes apart
+        if self._seen_only_from_afar(m.nearest_view_m) and self._far(o, mt):
+            return "far_view"
         earlier = self._at_earlier_pose(o, mt.pose_xytheta)
         if tier == -2 and not earlier:
             return "not_earlier"
@@ -1377,6 +1392,10 @@ class GatmoMapper:
         if not self._distinctive(o) and self._far(o, mt):
             self._refused(o, "gamma_far", pts)
             return None
+        if (self._seen_only_from_afar(self._gamma_near.get(g.id, float("inf")))
+                and self._far(o, mt)):
+            self._refused(o, "gamma_far_view", pts)
+            return None
         if mt.score < self.cfg.match_min_score:
             self._refused(o, "gamma_score", pts)
             return None
@@ -1395,6 +1414,12 @@ class GatmoMapper:
         if mt is None:
             return None
         return _rank_key(o, mt, 0, self._at_earlier_pose(o, mt.pose_xytheta)), mt
+
+    def _seen_only_from_afar(self, nearest_view_m: float) -> bool:
+        """A chair whose nearest view was ``nearest_view_m`` (inf: not known, as for a track
+        laid without a scan) was never seen within ``match_far_near_view_m``."""
+        return bool(np.isfinite(nearest_view_m)
+                    and nearest_view_m > self.cfg.match_far_near_view_m)
 
     def _far(self, o: MapObject, mt) -> bool:
         """The match ``mt`` puts ``o`` more than ``doubt_search_m`` from where it is."""
@@ -1487,13 +1512,14 @@ class GatmoMapper:
             # confirmed; a confidently wrong filter makes furniture out of walls
             self.counts["gamma_unverified"] += 1
             return
-        self._gamma_part(pts, stamp_s, events, m.scan_points)
+        self._gamma_part(pts, stamp_s, events, m.scan_points, m.nearest_view_m)
 
     def _gamma_part(self, pts: np.ndarray, stamp_s, events,
-                    scan_points: list | None = None) -> None:
+                    scan_points: list | None = None,
+                    nearest_view_m: float = float("inf")) -> None:
         """Cells ``pts`` (P, 2) of a chair become a Gamma object, or join the one they overlap;
         ``scan_points``: the returns on it of the scans of its track that saw it
-        (:attr:`Metaobject.scan_points`)."""
+        (:attr:`Metaobject.scan_points`); ``nearest_view_m``: its track's nearest view."""
         # a part of an object the map already has where it stands (seen before it was placed
         # there) is no new object
         near, _ = self._explained(pts)
@@ -1509,6 +1535,8 @@ class GatmoMapper:
             same.seen_count += 1
             self._gamma_this_run.add(same.id)
             self._gamma_points.setdefault(same.id, []).extend(scan_points or [])
+            self._gamma_near[same.id] = min(self._gamma_near.get(same.id, float("inf")),
+                                            nearest_view_m)
             self._fields.pop(same.id, None)
             self._inner.pop(same.id, None)
             self._cores.pop(same.id, None)
@@ -1521,6 +1549,7 @@ class GatmoMapper:
         self.object_map.objects.append(o)
         self._gamma_this_run.add(o.id)
         self._gamma_points[o.id] = list(scan_points or [])
+        self._gamma_near[o.id] = nearest_view_m
         events.append(Event(float(stamp_s), self.run, "gamma", o.id, None, None,
                             pose.tolist()))
         self.counts["gamma"] += 1

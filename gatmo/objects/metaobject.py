@@ -40,6 +40,9 @@ class Metaobject:
         self.ll_chair = 0.0
         self.centres: list[np.ndarray] = []
         self.matched_object: int | None = None
+        # the nearest this track was seen from: the least, over its scans, of the median range
+        # of its returns from the laser [m] (set by the mapper; inf until then)
+        self.nearest_view_m = float("inf")
         self.waited = False  # a match was held back as ambiguous (GatmoMapper._ambiguous)
         # the scans that saw it (set by the mapper): laser pose, angles, ranges, reach
         self.views: list[tuple] = []
@@ -216,6 +219,7 @@ class Metaobject:
         self.n_obs = max(self.n_obs, other.n_obs)
         self.n_verified += other.n_verified
         self.first_seen = min(self.first_seen, other.first_seen)
+        self.nearest_view_m = min(self.nearest_view_m, other.nearest_view_m)
         self.last_seen = max(self.last_seen, other.last_seen)
         self.ll_chair = max(self.ll_chair, other.ll_chair)
         self.ll_person = min(self.ll_person, other.ll_person)

@@ -387,17 +387,20 @@ def test_objects_json_round_trip_and_errors(tmp_path):
         assert e.value.field == f"objects[1].{field}", (field, bad)
 
 
-def test_end_to_end_moved_box_is_relocated_with_its_id():
-    # map: a box at (6, 2); world: the box moved to (3.5, 4.2) and turned; a person walks
+def _moved_box_run(**cfg_update):
+    """(mapper, box, events, the box's true cells (K, 2), its true pose) after a run through
+    a room whose map has a box at (6, 2) that has moved to (3.9, 4.3) and turned; the robot
+    passes it at 1.4-2 m."""
+    cfg = CFG.model_copy(update=cfg_update)
     g = room_grid(10, 6, 0.05, boxes=[(6.0, 2.0, 6.7, 2.7)])
-    om = ObjectMap.from_grid(g, CFG)
+    om = ObjectMap.from_grid(g, cfg)
     box = [o for o in om.objects if not o.structure][0]
     true_new = np.array([3.9, 4.3, 0.4])
     world = room_grid(10, 6, 0.05)
     pts = transform_points(true_new, box.shape_xy)
     c = world.world_to_cell(pts)
     world.cells[c[:, 1], c[:, 0]] = 100
-    m = GatmoMapper(om, g, CFG)
+    m = GatmoMapper(om, g, cfg)
     m.begin_run(1)
     events = []
     path = [(x, 2.9, 0.0) for x in np.linspace(2.0, 5.0, 40)]
@@ -406,6 +409,12 @@ def test_end_to_end_moved_box_is_relocated_with_its_id():
     for i, pose in enumerate(path):
         s = make_scan(world, pose, n_beams=361, max_range_m=6.0, stamp_s=0.1 * i)
         events += m.update(np.array(pose), s, pose_confident=True, stamp_s=0.1 * i)
+    return m, box, events, pts, true_new
+
+
+def test_end_to_end_moved_box_is_relocated_with_its_id():
+    # map: a box at (6, 2); world: the box moved to (3.9, 4.3) and turned
+    m, box, events, pts, true_new = _moved_box_run()
     kinds = [e.kind for e in events if e.object_id == box.id]
     assert kinds[:2] == ["absent", "relocated"], kinds
     moved = transform_points(box.pose_xytheta, box.shape_xy)
@@ -415,6 +424,24 @@ def test_end_to_end_moved_box_is_relocated_with_its_id():
     assert np.mean(d) < 0.05
     assert np.hypot(*(box.pose_xytheta[:2] - true_new[:2])) < 0.15
     assert box.status == "M" and box.moved_count == 1 and box.history[-1]["status"] == "M"
+
+
+@pytest.mark.parametrize("near_view_m, waited, relocated",
+                         [(5.0, False, True), (1.2, True, True), (0.5, True, False)])
+def test_a_match_across_the_room_needs_a_chair_seen_from_near_enough(near_view_m, waited,
+                                                                      relocated):
+    # the box moved 2.6 m; the median range of its returns is 1.55 m when it first matches
+    # and falls to 1.1 m as the robot comes closer at the end. A chair not yet seen within
+    # match_far_near_view_m is refused (it waits for a nearer view, or never takes the box)
+    m, box, events, _, true_new = _moved_box_run(match_far_near_view_m=near_view_m)
+    kinds = [e.kind for e in events if e.object_id == box.id]
+    assert kinds[0] == "absent"
+    assert (m.refusals.get((box.id, "far_view"), 0) > 0) is waited
+    assert ("relocated" in kinds) is relocated, kinds
+    if relocated:
+        assert np.hypot(*(box.pose_xytheta[:2] - true_new[:2])) < 0.15
+    else:
+        assert box.status == "A"
 
 
 def test_partial_view_of_a_square_is_aligned_by_its_lines():
