@@ -96,12 +96,13 @@ class GatmoConfig(GatmoModel):
     track_range_margin_m: float = Field(
         0.7, ge=0, description="returns within this of the laser's max range are not tracked")
     match_far_near_view_m: float = Field(
-        5.0, gt=0, description="a match putting an object more than doubt_search_m from where "
+        3.3, gt=0, description="a match putting an object more than doubt_search_m from where "
         "it was needs a chair seen within this range [m] (the median range of its returns) "
         "in at least one scan: from farther, a beam every 6 cm or more and a degree of heading "
-        "error smear the outline past telling look-alikes across the room apart. At the "
-        "default, track_max_range_m, it refuses nothing (docs/experiments.md, forty-third "
-        "session)")
+        "error smear the outline past telling look-alikes across the room apart. 3.3 m is "
+        "how far a 4 m laser tracks (track_range_margin_m), so there it refuses nothing; with "
+        "an 8 m laser it cuts the false relocations by a third (docs/experiments.md, "
+        "forty-third session)")
     # person hypothesis (constant-velocity Kalman filter on the centre)
     person_accel_std: float = Field(1.5, gt=0)
     person_meas_std_m: float = Field(0.1, gt=0)

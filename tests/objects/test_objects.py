@@ -114,9 +114,11 @@ def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, re
     # a 0.5 m box is gone; a 1.4 m desk stands across the laser's 4 m range limit, so only its
     # near half is within reach. Tracked up to the range limit, that half looks like the box
     # and the box is relocated onto it; with the desk's returns in the last 0.7 m of range
-    # untracked but counted, the ring test sees the rest of the desk and refuses
+    # untracked but counted, the ring test sees the rest of the desk and refuses. (The desk's
+    # end is 3.3-4 m from the laser and 4 m from the box's place: match_far_near_view_m, the
+    # default 3.3 m, would refuse the match too; here it is off, to test the margin alone)
     m, box, world = _one_object((12, 8), (3.0, 1.0, 3.5, 1.5), [(4.8, 4.2, 5.3, 5.6)],
-                                track_range_margin_m=margin_m)
+                                track_range_margin_m=margin_m, match_far_near_view_m=5.0)
     path = [(2.0, 1.25, th) for th in np.linspace(-0.3, 0.3, 10)]  # sees the box gone
     path += [(1.3, y, 0.0) for y in np.linspace(1.6, 3.4, 60)]  # drives past the desk's end
     kinds = [(e.kind, e.object_id) for e in _drive(m, world, path, max_range_m=4.0)]
@@ -128,7 +130,9 @@ def _desk_half_for_a_box(n_desk: int, **update):
     """(mapper, the box, path, world): a 0.5 m box gone from the map, a desk the map has out of
     sight, and the same desk standing elsewhere, its near half in reach of a 4 m laser for
     ``n_desk`` scans of the path; ``update``: GatmoConfig fields beyond the defaults."""
-    cfg = CFG.model_copy(update={"track_range_margin_m": 0.0,
+    # (tracked up to the range limit, the desk seen from 3.3-4 m: match_far_near_view_m off,
+    # as these tests are of the ambiguity rules)
+    cfg = CFG.model_copy(update={"track_range_margin_m": 0.0, "match_far_near_view_m": 5.0,
                                  "match_ambiguity_patience_scans": 100, **update})
     g = room_grid(12, 8, 0.05, boxes=[(3.0, 1.0, 3.5, 1.5), (9.5, 6.5, 10.9, 7.2)])
     world = room_grid(12, 8, 0.05, boxes=[(4.8, 4.2, 5.3, 5.6)])
