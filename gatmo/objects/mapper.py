@@ -1071,16 +1071,12 @@ class GatmoMapper:
             m = by_id[mid]
             z = np.vstack(zs)
             m.update(z, stamp_s, verified=verified)
-            if self._view is not None:
-                m.add_view(self._view)
-                self._note_range(m, z)
+            self._note_view(m, z)
             touched.append(m)
         for z in fresh:
             m = Metaobject(self._next_meta, z, stamp_s, c, self._grid.resolution_m,
                            verified=verified)
-            if self._view is not None:
-                m.add_view(self._view)
-                self._note_range(m, z)
+            self._note_view(m, z)
             self._next_meta += 1
             self._meta.append(m)
         self._merge_metaobjects()
@@ -1091,9 +1087,12 @@ class GatmoMapper:
                     and m.n_obs % 3 == 0 and m.dominant() == "chair"):
                 self._try_match(m, stamp_s, events)
 
-    def _note_range(self, m: Metaobject, points_xy: np.ndarray) -> None:
-        """Keep the nearest view of track ``m``: the median range [m] of ``points_xy`` (its
-        returns in this scan, map frame) from the laser of the current view."""
+    def _note_view(self, m: Metaobject, points_xy: np.ndarray) -> None:
+        """Give track ``m`` the current scan's view (if any) and keep its nearest view: the
+        median range [m] of ``points_xy`` (its returns in this scan, map frame) from the laser."""
+        if self._view is None:
+            return
+        m.add_view(self._view)
         r = float(np.median(np.hypot(*(points_xy - self._view[0][:2]).T)))
         m.nearest_view_m = min(m.nearest_view_m, r)
 
