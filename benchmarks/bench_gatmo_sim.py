@@ -38,8 +38,9 @@ def stack_config(overrides: list[str] | None = None):
 
 def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None = None,
              overrides: list[str] | None = None, before: bool = True,
-             sim_overrides: list[str] | None = None) -> dict:
-    from benchmarks._overrides import with_overrides
+             sim_overrides: list[str] | None = None,
+             static_overrides: list[str] | None = None) -> dict:
+    from benchmarks._overrides import static_amcl, with_overrides
     from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.pipeline.runs import compare
 
@@ -48,8 +49,10 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
         sim.robot.duration_s = seconds
     scen = simulate_scenario(tmp / f"s{seed}", preset=preset, runs=runs, seed=seed, config=sim)
     t0 = time.perf_counter()
+    cfg = stack_config(overrides)
     res = compare(scen.map_yaml, scen.logs, tmp / f"c{seed}", scenario_json=scen.scenario_json,
-                  config=stack_config(overrides), pictures=False, keep_traces=True)
+                  config=cfg, pictures=False, keep_traces=True,
+                  static_amcl=static_amcl(cfg, static_overrides))
     outcomes = piece_outcomes(scen, res, tmp / f"c{seed}")
     census = last_census(scen, tmp / f"c{seed}")
     secs = time.perf_counter() - t0
@@ -313,14 +316,14 @@ def main(argv=None) -> int:
     ap.add_argument("--procs", type=int, default=1, help="seeds run in parallel")
     ap.add_argument("--no-before", action="store_true",
                     help="skip the world before anything moved")
-    add_override_args(ap)
+    add_override_args(ap, static=True)
     args = ap.parse_args(argv or [])
     rows = []
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     with tempfile.TemporaryDirectory() as tmp:
         job = partial(one_seed, preset=args.preset, runs=args.runs, tmp=Path(tmp),
                       seconds=args.seconds, overrides=args.set, before=not args.no_before,
-                      sim_overrides=args.sim_set)
+                      sim_overrides=args.sim_set, static_overrides=args.static_set)
         with ProcessPoolExecutor(args.procs) as ex:
             for row in ex.map(job, seeds):
                 rows.append(row)
@@ -329,6 +332,7 @@ def main(argv=None) -> int:
     total = summarize(rows, preset=args.preset, runs=args.runs, overrides=args.set,
                       before=not args.no_before)
     total["sim_overrides"] = args.sim_set
+    total["static_overrides"] = args.static_set
     print(json.dumps(total, indent=1))
     OUT.mkdir(exist_ok=True)
     (OUT / f"gatmo_sim_{args.preset}{args.tag}.json").write_text(json.dumps({"rows": rows,

@@ -264,6 +264,11 @@ def compare(
     out: Annotated[Path, typer.Option("--out", help="Output folder.")],
     params: ParamsOpt = None,
     config: ConfigOpt = None,
+    static_params: Annotated[
+        Path | None, typer.Option("--static-params", help="AMCL parameter YAML for the static "
+                                  "side only, e.g. the one your robot runs today (default: the "
+                                  "full stack's).")
+    ] = None,
     initial_pose: PoseOpt = None,
     global_loc: GlobalOpt = False,
     ground_truth: Annotated[
@@ -307,6 +312,7 @@ def compare(
             initial_pose=_parse_pose(initial_pose), global_localization=global_loc,
             gt_paths=ground_truth, relations_path=relations, fmt=fmt, max_scans=max_scans,
             scenario_json=scenario, progress=update, observer=observer,
+            static_params_path=static_params,
         )
     _print_compare(result)
     if rerun_save is not None:

@@ -447,10 +447,13 @@ class CompareResult:
     overall: dict  # side -> dict
     pictures: list
     traces: dict = field(default_factory=dict)  # (log index, side) -> RunTrace
+    # the static side ran its own amcl section (out_dir/static_amcl.yaml), not the stack's
+    static_amcl: bool = False
 
     def as_dict(self) -> dict:
         return {"out_dir": str(self.out_dir), "logs": self.rows, "overall": self.overall,
-                "pictures": [str(p) for p in self.pictures]}
+                "pictures": [str(p) for p in self.pictures],
+                "static_config": "static_amcl.yaml" if self.static_amcl else "config.yaml"}
 
 
 def _overall(rows: list) -> dict:
@@ -499,9 +502,16 @@ def compare(
     config=None,
     sides: Sequence[str] = SIDES,
     observer=None,
+    static_params_path: str | Path | None = None,
+    static_amcl=None,
 ) -> CompareResult:
     """``gatmo compare``: static localizer vs full stack on the same logs, same seeds.
 
+    The static side runs the full stack's ``amcl`` section unless ``static_params_path`` (a
+    ROS 1 / Nav2 AMCL YAML, as ``params_path``) or ``static_amcl`` (an
+    :class:`gatmo.localization.config.AmclConfig`) gives it its own: the AMCL a robot runs
+    today against gatmo's configuration. That section is then written to
+    ``out_dir/static_amcl.yaml`` and named in ``summary.json``.
     ``observer``: a live view (:class:`gatmo.pipeline.live.RerunObserver`) or None."""
     from gatmo.maps.io import load_map
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
@@ -514,6 +524,16 @@ def compare(
         )
     cfg = config if config is not None else load_stack_config(config_path, params_path)
     atomic_write_text(out / "config.yaml", dump_stack_config(cfg))
+    if static_params_path is not None:
+        from gatmo.localization.params import load_amcl_yaml
+
+        static_amcl = load_amcl_yaml(static_params_path)
+    static_cfg = cfg
+    if static_amcl is not None:
+        from gatmo.config import dump_model
+
+        static_cfg = cfg.model_copy(update={"amcl": static_amcl})
+        atomic_write_text(out / "static_amcl.yaml", dump_model(static_amcl))
     base = load_map(map_yaml)
     meta = _base_meta(Path(map_yaml), base)
     relations = None
@@ -551,7 +571,7 @@ def compare(
             observer.on_map("gatmo", grid_before)
             observer.on_objects(mapper.object_map.objects)
 
-        static = LocalizationStack(make_localizer(cfg, base, seed, pose0, pose0 is None))
+        static = LocalizationStack(make_localizer(static_cfg, base, seed, pose0, pose0 is None))
         t_static = run_side(static, scans, log=str(log), side="static", run_id=k + 1,
                             progress=_offset(progress, done), total=None, observer=observer)
         # its localizer on grid_before (and, with fusion.passes, the map a pass before ended with)
@@ -583,11 +603,13 @@ def compare(
         if keep_traces:
             traces[(k, "static")] = t_static
             traces[(k, "gatmo")] = t_gatmo
-        result = CompareResult(out, rows, _overall(rows), pics, traces)
+        result = CompareResult(out, rows, _overall(rows), pics, traces,
+                               static_amcl=static_amcl is not None)
         atomic_write_text(
             out / "summary.json", json.dumps(result.as_dict(), indent=2, default=_json_default)
         )
-    return CompareResult(out, rows, _overall(rows), pics, traces)
+    return CompareResult(out, rows, _overall(rows), pics, traces,
+                         static_amcl=static_amcl is not None)
 
 
 def _run_number(log, default: int) -> int:

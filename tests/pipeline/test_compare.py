@@ -204,3 +204,36 @@ def test_a_second_pass_localizes_on_the_map_the_first_ended_with(scen, keep, mon
     assert not np.array_equal(trace.poses_xytheta, single.poses_xytheta)
     err = np.hypot(*(trace.poses_xytheta[:, :2] - gt[:, :2]).T)
     assert np.median(err) < 0.1
+
+
+def test_the_static_side_can_run_its_own_amcl_parameters(scen, tmp_path):
+    """``--static-params``: the static side runs that AMCL YAML, exactly as ``--params`` would
+    run it, and the full stack runs what it runs without it."""
+    from gatmo.config import load_model
+    from gatmo.localization.config import AmclConfig
+
+    params = tmp_path / "amcl.yaml"  # ROS 1 names; a flat field, unlike the stack's default
+    params.write_text("laser_model_type: likelihood_field\nlaser_sigma_hit: 0.3\n"
+                      "laser_max_beams: 30\n")
+    logs = [str(scen.logs[0])]
+    common = ["--map", str(scen.map_yaml), "--max-scans", "60"]
+
+    def poses(out, side):
+        return np.loadtxt(out / side / "01_run_1" / "poses.tum")
+
+    outs = {k: tmp_path / k for k in ("plain", "static_only", "both")}
+    assert main(["compare", *logs, *common, "--out", str(outs["plain"])]) == 0
+    assert main(["compare", *logs, *common, "--static-params", str(params),
+                 "--out", str(outs["static_only"])]) == 0
+    assert main(["compare", *logs, *common, "--params", str(params),
+                 "--out", str(outs["both"])]) == 0
+    mine = outs["static_only"]
+    np.testing.assert_array_equal(poses(mine, "static"), poses(outs["both"], "static"))
+    np.testing.assert_array_equal(poses(mine, "gatmo"), poses(outs["plain"], "gatmo"))
+    assert not np.array_equal(poses(mine, "static"), poses(outs["plain"], "static"))
+    saved = load_model(AmclConfig, mine / "static_amcl.yaml")
+    assert (saved.laser_model, saved.sigma_hit_m, saved.max_beams) == ("likelihood_field", 0.3, 30)
+    assert json.loads((mine / "summary.json").read_text())["static_config"] == "static_amcl.yaml"
+    assert json.loads((outs["plain"] / "summary.json").read_text())["static_config"] == \
+        "config.yaml"
+    assert not (outs["plain"] / "static_amcl.yaml").exists()
