@@ -167,18 +167,31 @@ def make_matcher(cfg):
     return ScanMatchOdometry.from_config(cfg.icp)
 
 
+#: the anchor filter's random seed is the localizer's plus this (fusion.anchor_filter)
+ANCHOR_SEED_OFFSET = 7919
+
+
 def make_full_stack(cfg, mapper, seed: int, initial_pose,
                     loc_grid: OccupancyGrid | None = None) -> LocalizationStack:
     """The full stack: the localizer on GATMO's current map, or on ``loc_grid`` fixed if given
     (global localization when ``initial_pose`` is None), the scan matcher if
     ``cfg.fusion.use_scan_matcher``, GATMO."""
     grid = loc_grid if loc_grid is not None else mapper.localizer_grid()
+    anchor = None
+    if cfg.fusion.anchor_filter:
+        f = cfg.fusion
+        amcl = cfg.amcl.model_copy(update={"laser_model": f.anchor_laser_model,
+                                           "sigma_hit_m": f.anchor_sigma_hit_m})
+        # its own draw: the two filters' particles are independent
+        anchor = make_localizer(cfg.model_copy(update={"amcl": amcl}), grid,
+                                seed + ANCHOR_SEED_OFFSET, initial_pose, initial_pose is None)
     return LocalizationStack(
         make_localizer(cfg, grid, seed, initial_pose, initial_pose is None),
         make_matcher(cfg) if cfg.fusion.use_scan_matcher else None,
         mapper,
         cfg.fusion,
         loc_grid=loc_grid,
+        anchor=anchor,
     )
 
 

@@ -208,6 +208,20 @@ class FusionConfig(GatmoModel):
         "wherever the pose explains too little of the scan)")
     relocalize_std_xy_m: float = Field(0.05, gt=0)
     relocalize_std_deg: float = Field(2.0, gt=0)
+    anchor_filter: bool = Field(
+        False, description="run a second particle filter beside the localizer, on the same map "
+        "and the raw scans, with AMCL's flat sensor model (anchor_laser_model, "
+        "anchor_sigma_hit_m; the rest of the localizer's parameters alike); when the two part "
+        "by more than anchor_gap_m on anchor_gap_updates of the localizer's updates in a row, "
+        "the localizer is started again at the anchor's pose (relocalize_std_*) and GATMO waits "
+        "settle_after_jump_m. The sharp model's cloud can lock onto moved furniture; the flat "
+        "one gives each beam a bounded say and is seldom lost where furniture moved")
+    anchor_laser_model: Literal["likelihood_field", "likelihood_field_prob", "beam"] = Field(
+        "likelihood_field", description="the anchor filter's sensor model (AMCL's default)")
+    anchor_sigma_hit_m: float = Field(0.2, gt=0, description="the anchor filter's sigma_hit "
+                                      "(AMCL's default)")
+    anchor_gap_m: float = Field(0.4, gt=0, description="see anchor_filter")
+    anchor_gap_updates: int = Field(5, ge=1, description="see anchor_filter")
     passes: int = Field(
         1, ge=1, le=4, description="passes over each log (offline): every pass after the "
         "first localizes on the map the pass before ended with, fixed, and GATMO starts again "
@@ -435,8 +449,12 @@ class LocalizationStack:
     """
 
     def __init__(self, localizer, matcher=None, mapper=None, fusion: FusionConfig | None = None,
-                 loc_grid: OccupancyGrid | None = None):
+                 loc_grid: OccupancyGrid | None = None, anchor=None):
         self.localizer = localizer
+        # fusion.anchor_filter: the second filter (flat sensor model, same map, raw scans), and
+        # the localizer's updates in a row on which the two have parted
+        self.anchor = anchor
+        self._anchor_apart = 0
         # a fixed map for the localizer, the alignment and the relocalizer (a second pass,
         # ``fusion.passes``); None: GATMO's current map, updated as it changes
         self.loc_grid = loc_grid
@@ -488,9 +506,35 @@ class LocalizationStack:
         self._reloc_found = None
         self._reloc_stale = True
         self._reloc_odom, self._reloc_travel_m = None, 0.0
+        self._anchor_apart = 0
         self._injected_seen = _injected(self.localizer)
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
+
+    def _parted_from_anchor(self, est, loc_pose: np.ndarray, anchor_est) -> np.ndarray | None:
+        """The anchor filter's pose (3,) if the localizer has parted from it by more than
+        ``anchor_gap_m`` on ``anchor_gap_updates`` of its updates in a row (counted on this
+        one), else None."""
+        if not getattr(est, "updated", True):
+            return None
+        a = np.asarray(anchor_est.pose_xytheta, dtype=float)
+        if np.hypot(*(a[:2] - loc_pose[:2])) <= self.fusion.anchor_gap_m:
+            self._anchor_apart = 0
+            return None
+        self._anchor_apart += 1
+        if self._anchor_apart < self.fusion.anchor_gap_updates:
+            return None
+        self._anchor_apart = 0
+        return _wrapped(a)
+
+    def _restart_at(self, pose_xytheta: np.ndarray) -> None:
+        """Start the localizer again at a pose the stack found (relocalize_std_*); GATMO waits
+        as after any jump, and the matcher and the published pose are re-anchored."""
+        s_xy, s_th = self.fusion.relocalize_std_xy_m, np.radians(self.fusion.relocalize_std_deg)
+        self.localizer.set_initial_pose(pose_xytheta, np.diag([s_xy**2, s_xy**2, s_th**2]))
+        self._settle_left_m = self.fusion.settle_after_jump_m
+        self.T_map_match = None
+        self._published_anchor = None
 
     def _apply_map_changes(self) -> bool:
         """Hand GATMO's queued region updates to the localizer; True if there were any."""
@@ -499,6 +543,8 @@ class LocalizationStack:
             return False  # the localizer keeps its fixed map
         for cells_new, ix0, iy0 in changes:
             self.localizer.update_map_region(cells_new, ix0, iy0)
+            if self.anchor is not None:
+                self.anchor.update_map_region(cells_new, ix0, iy0)
         self.n_map_updates += len(changes)
         return bool(changes)
 
@@ -511,6 +557,8 @@ class LocalizationStack:
         t0 = time.perf_counter()
         match = self.matcher.register(scan) if self.matcher is not None else None
         masked, withheld = self._masked(scan)
+        anchor_est = (self.anchor.update(scan.odom_pose_xytheta, scan)
+                      if self.anchor is not None else None)
         if self._takes_withheld:
             est = self.localizer.update(scan.odom_pose_xytheta, masked, withheld=withheld)
         else:
@@ -541,13 +589,15 @@ class LocalizationStack:
             relocalized = found is not None
             if found is not None:
                 self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))
-                s_xy, s_th = self.fusion.relocalize_std_xy_m, np.radians(
-                    self.fusion.relocalize_std_deg)
-                self.localizer.set_initial_pose(found, np.diag([s_xy**2, s_xy**2, s_th**2]))
+                self._restart_at(found)
                 loc_pose = found
-                self._settle_left_m = self.fusion.settle_after_jump_m
-                self.T_map_match = None  # the matcher is re-anchored on the new pose
-                self._published_anchor = None
+        if anchor_est is not None and not relocalized:
+            found = self._parted_from_anchor(est, loc_pose, anchor_est)
+            if found is not None:
+                relocalized = True
+                self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))
+                self._restart_at(found)
+                loc_pose = found
         self._last_loc, self._last_odom = loc_pose, odom
         self._last_precise = is_confident(est, self.fusion, strict=True, require_update=False)
         reset = False

@@ -972,3 +972,85 @@ def test_a_stack_on_a_fixed_map_keeps_it_while_gatmo_changes_its_own(fixed):
     else:
         assert len(loc.regions) == len(truth) == stack.n_map_updates
         assert stack.current_grid(other) is own and stack._map_grid() is own
+
+
+class AnchorStandIn(ScriptedLocalizer):
+    """The anchor filter: the true pose plus ``bias`` on the scans in ``off_at``; records the
+    map regions it is handed."""
+
+    def __init__(self, truth, off_at=(), bias=(0.0, 0.0, 0.0)):
+        super().__init__(truth, confident_at=range(len(truth)))
+        self.off_at, self.off_bias = set(off_at), np.asarray(bias, dtype=float)
+
+    def update(self, odom, scan, withheld=None):
+        est = super().update(odom, scan, withheld)
+        if self.i - 1 in self.off_at:
+            est.pose_xytheta = est.pose_xytheta + self.off_bias
+        return est
+
+
+class _OneChange(_MapOnly):
+    """A map with one region update queued on the first scan."""
+
+    def __init__(self, grid):
+        super().__init__(grid)
+        self.queued = [(np.zeros((4, 5), dtype=np.int8), 10, 12)]
+
+    def pop_map_changes(self):
+        out, self.queued = self.queued, []
+        return out
+
+
+@pytest.mark.parametrize("offset, anchor_off, restart_at", [
+    ((0.9, -0.6, 0.1), (), 14),  # the filter slid 1.1 m: started again on its 5th update apart
+    ((0.3, 0.0, 0.0), (), None),  # 0.3 m apart: within anchor_gap_m
+    ((0.0, 0.0, 0.0), range(10, 14), None),  # the anchor strays for 4 updates only
+    ((0.0, 0.0, 0.0), range(10, 40), 14),  # it strays for good: the filter follows it
+])
+def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose(
+        offset, anchor_off, restart_at):
+    """``anchor_filter``: a second filter on the same map with a flat sensor model. When the
+    localizer and it part by more than ``anchor_gap_m`` (0.4 m) on ``anchor_gap_updates`` (5)
+    updates in a row, the localizer starts again at the anchor's pose and GATMO waits as after
+    any jump; a shorter or smaller parting changes nothing. The stack trusts the anchor: one
+    that strays for good takes a right filter with it (hence 5 updates, and a flat model that
+    is seldom lost). The anchor gets the map's region updates too."""
+    grid, truth, scans = _reloc_world(40)
+    loc = StuckLocalizer(truth, offset, slip_at=10)
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    anchor = AnchorStandIn(truth, anchor_off, bias=(0.6, 0.3, 0.0))
+    mapper = _OneChange(grid)
+    stack = LocalizationStack(loc, None, mapper,
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True),
+                              anchor=anchor)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    assert anchor.regions == [((4, 5), 10, 12)]
+    restarted = [i for i, o in enumerate(out) if o.relocalized]
+    if restart_at is None:
+        assert restarted == [] and loc.restarts == 0
+        return
+    assert restarted == [restart_at] and loc.restarts == 1
+    expect = truth[restart_at] + (anchor.off_bias if restart_at in anchor.off_at else 0.0)
+    np.testing.assert_allclose(out[restart_at].localizer_pose_xytheta, expect, atol=1e-9)
+    assert len(stack.relocalizations) == 1
+    assert all(o.gatmo_pose_xytheta is None for o in out[restart_at:restart_at + 20])
+
+
+def test_the_anchor_filter_runs_the_localizers_parameters_with_a_flat_sensor_model():
+    """``make_full_stack`` builds the anchor from the stack's ``amcl`` section with
+    ``anchor_laser_model`` and ``anchor_sigma_hit_m``, and its own random draw."""
+    from gatmo.pipeline.config import sim_stack_config
+    from gatmo.pipeline.runs import _make_mapper, make_full_stack
+
+    cfg = sim_stack_config()
+    grid, truth, _ = _reloc_world(5)
+    assert make_full_stack(cfg, _make_mapper(cfg, grid, None), 3, truth[0]).anchor is None
+    cfg.fusion.anchor_filter = True
+    stack = make_full_stack(cfg, _make_mapper(cfg, grid, None), 3, truth[0])
+    a, loc = stack.anchor.cfg, stack.localizer.cfg
+    assert (a.laser_model, a.sigma_hit_m) == ("likelihood_field", 0.2)
+    assert (loc.laser_model, loc.sigma_hit_m) == ("likelihood_field_prob", 0.1)
+    assert (a.alpha1, a.alpha2, a.max_particles) == (loc.alpha1, loc.alpha2, loc.max_particles)
+    assert not np.array_equal(stack.anchor.particles, stack.localizer.particles)
+    np.testing.assert_allclose(stack.anchor.particles.mean(axis=0)[:2], truth[0, :2], atol=0.02)
