@@ -211,16 +211,21 @@ class FusionConfig(GatmoModel):
     anchor_filter: bool = Field(
         False, description="run a second particle filter beside the localizer, on the same map "
         "and the raw scans, with AMCL's flat sensor model (anchor_laser_model, "
-        "anchor_sigma_hit_m; the rest of the localizer's parameters alike); when the two part "
+        "anchor_sigma_hit_m; the rest of the localizer's parameters alike). When the two part "
         "by more than anchor_gap_m on anchor_gap_updates of the localizer's updates in a row, "
-        "the localizer is started again at the anchor's pose (relocalize_std_*) and GATMO waits "
-        "settle_after_jump_m. The sharp model's cloud can lock onto moved furniture; the flat "
-        "one gives each beam a bounded say and is seldom lost where furniture moved")
+        "the one that moved against odometry since they last agreed (within anchor_agree_m) "
+        "is started again at the other's pose (relocalize_std_*): the localizer if it strayed "
+        "more than the anchor by anchor_odom_margin_m, and then GATMO waits "
+        "settle_after_jump_m; else the anchor. The sharp model's cloud can slide onto moved "
+        "furniture; the flat one gives each beam a bounded say, and where it is lost instead, "
+        "the wheels tell which of the two moved")
     anchor_laser_model: Literal["likelihood_field", "likelihood_field_prob", "beam"] = Field(
         "likelihood_field", description="the anchor filter's sensor model (AMCL's default)")
     anchor_sigma_hit_m: float = Field(0.2, gt=0, description="the anchor filter's sigma_hit "
                                       "(AMCL's default)")
     anchor_gap_m: float = Field(0.4, gt=0, description="see anchor_filter")
+    anchor_agree_m: float = Field(0.2, gt=0, description="see anchor_filter")
+    anchor_odom_margin_m: float = Field(0.1, ge=0, description="see anchor_filter")
     anchor_gap_updates: int = Field(5, ge=1, description="see anchor_filter")
     passes: int = Field(
         1, ge=1, le=4, description="passes over each log (offline): every pass after the "
@@ -455,6 +460,9 @@ class LocalizationStack:
         # the localizer's updates in a row on which the two have parted
         self.anchor = anchor
         self._anchor_apart = 0
+        # (localizer pose, anchor pose, odometry) at the last update the two agreed on
+        self._anchor_ref: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.anchor_restarts = 0  # the anchor started again at the localizer's pose
         # a fixed map for the localizer, the alignment and the relocalizer (a second pass,
         # ``fusion.passes``); None: GATMO's current map, updated as it changes
         self.loc_grid = loc_grid
@@ -507,25 +515,44 @@ class LocalizationStack:
         self._reloc_stale = True
         self._reloc_odom, self._reloc_travel_m = None, 0.0
         self._anchor_apart = 0
+        self._anchor_ref = None
         self._injected_seen = _injected(self.localizer)
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
-    def _parted_from_anchor(self, est, loc_pose: np.ndarray, anchor_est) -> np.ndarray | None:
-        """The anchor filter's pose (3,) if the localizer has parted from it by more than
-        ``anchor_gap_m`` on ``anchor_gap_updates`` of its updates in a row (counted on this
-        one), else None."""
+    def _parted_from_anchor(self, est, loc_pose: np.ndarray, anchor_est,
+                            odom: np.ndarray) -> np.ndarray | None:
+        """The anchor filter's pose (3,) if the localizer has parted from it (more than
+        ``anchor_gap_m`` on ``anchor_gap_updates`` of its updates in a row, counted on this one)
+        and moved against odometry since they last agreed by ``anchor_odom_margin_m`` more than
+        the anchor did; else None. Where the anchor is the one that moved, it is started again
+        at the localizer's pose."""
         if not getattr(est, "updated", True):
             return None
-        a = np.asarray(anchor_est.pose_xytheta, dtype=float)
-        if np.hypot(*(a[:2] - loc_pose[:2])) <= self.fusion.anchor_gap_m:
+        f = self.fusion
+        a = _wrapped(np.asarray(anchor_est.pose_xytheta, dtype=float))
+        gap = float(np.hypot(*(a[:2] - loc_pose[:2])))
+        if gap <= f.anchor_agree_m or self._anchor_ref is None:
+            self._anchor_ref = (loc_pose.copy(), a, odom.copy())
+        if gap <= f.anchor_gap_m:
             self._anchor_apart = 0
             return None
         self._anchor_apart += 1
-        if self._anchor_apart < self.fusion.anchor_gap_updates:
+        if self._anchor_apart < f.anchor_gap_updates:
             return None
         self._anchor_apart = 0
-        return _wrapped(a)
+        ref_loc, ref_anchor, ref_odom = self._anchor_ref
+        d_odom = relative(ref_odom, odom)
+        strayed_loc = np.hypot(*(compose(ref_loc, d_odom)[:2] - loc_pose[:2]))
+        strayed_anchor = np.hypot(*(compose(ref_anchor, d_odom)[:2] - a[:2]))
+        if strayed_loc > strayed_anchor + f.anchor_odom_margin_m:
+            self._anchor_ref = (a.copy(), a.copy(), odom.copy())
+            return a
+        s_xy, s_th = f.relocalize_std_xy_m, np.radians(f.relocalize_std_deg)
+        self.anchor.set_initial_pose(loc_pose, np.diag([s_xy**2, s_xy**2, s_th**2]))
+        self.anchor_restarts += 1
+        self._anchor_ref = (loc_pose.copy(), loc_pose.copy(), odom.copy())
+        return None
 
     def _restart_at(self, pose_xytheta: np.ndarray) -> None:
         """Start the localizer again at a pose the stack found (relocalize_std_*); GATMO waits
@@ -535,6 +562,8 @@ class LocalizationStack:
         self._settle_left_m = self.fusion.settle_after_jump_m
         self.T_map_match = None
         self._published_anchor = None
+        # the anchor filter's reference starts again here: the jump is no straying
+        self._anchor_ref, self._anchor_apart = None, 0
 
     def _apply_map_changes(self) -> bool:
         """Hand GATMO's queued region updates to the localizer; True if there were any."""
@@ -592,7 +621,7 @@ class LocalizationStack:
                 self._restart_at(found)
                 loc_pose = found
         if anchor_est is not None and not relocalized:
-            found = self._parted_from_anchor(est, loc_pose, anchor_est)
+            found = self._parted_from_anchor(est, loc_pose, anchor_est, odom)
             if found is not None:
                 relocalized = True
                 self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))

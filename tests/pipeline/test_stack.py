@@ -975,16 +975,20 @@ def test_a_stack_on_a_fixed_map_keeps_it_while_gatmo_changes_its_own(fixed):
 
 
 class AnchorStandIn(ScriptedLocalizer):
-    """The anchor filter: the true pose plus ``bias`` on the scans in ``off_at``; records the
-    map regions it is handed."""
+    """The anchor filter: the true pose plus ``bias`` on the scans in ``off_at`` until it is
+    started again (then the true pose); records the map regions it is handed."""
 
     def __init__(self, truth, off_at=(), bias=(0.0, 0.0, 0.0)):
         super().__init__(truth, confident_at=range(len(truth)))
         self.off_at, self.off_bias = set(off_at), np.asarray(bias, dtype=float)
+        self.restarts = []  # scan indices
+
+    def set_initial_pose(self, pose_xytheta, cov=None):
+        self.restarts.append(self.i - 1)
 
     def update(self, odom, scan, withheld=None):
         est = super().update(odom, scan, withheld)
-        if self.i - 1 in self.off_at:
+        if self.i - 1 in self.off_at and not self.restarts:
             est.pose_xytheta = est.pose_xytheta + self.off_bias
         return est
 
@@ -1001,20 +1005,22 @@ class _OneChange(_MapOnly):
         return out
 
 
-@pytest.mark.parametrize("offset, anchor_off, restart_at", [
-    ((0.9, -0.6, 0.1), (), 14),  # the filter slid 1.1 m: started again on its 5th update apart
-    ((0.3, 0.0, 0.0), (), None),  # 0.3 m apart: within anchor_gap_m
-    ((0.0, 0.0, 0.0), range(10, 14), None),  # the anchor strays for 4 updates only
-    ((0.0, 0.0, 0.0), range(10, 40), 14),  # it strays for good: the filter follows it
+@pytest.mark.parametrize("offset, anchor_off, restart_at, anchor_restart_at", [
+    ((0.9, -0.6, 0.1), (), 14, None),  # the filter slid 1.1 m: started again on its 5th update
+    ((0.3, 0.0, 0.0), (), None, None),  # 0.3 m apart: within anchor_gap_m
+    ((0.0, 0.0, 0.0), range(10, 14), None, None),  # the anchor strays for 4 updates only
+    ((0.0, 0.0, 0.0), range(10, 40), None, 14),  # it strays for good: it is started again
+    ((0.9, -0.6, 0.1), range(10, 40), 14, None),  # both stray: the one that strayed more
 ])
 def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose(
-        offset, anchor_off, restart_at):
+        offset, anchor_off, restart_at, anchor_restart_at):
     """``anchor_filter``: a second filter on the same map with a flat sensor model. When the
     localizer and it part by more than ``anchor_gap_m`` (0.4 m) on ``anchor_gap_updates`` (5)
-    updates in a row, the localizer starts again at the anchor's pose and GATMO waits as after
-    any jump; a shorter or smaller parting changes nothing. The stack trusts the anchor: one
-    that strays for good takes a right filter with it (hence 5 updates, and a flat model that
-    is seldom lost). The anchor gets the map's region updates too."""
+    updates in a row, the one that moved against odometry since they last agreed is started
+    again at the other's pose: the localizer (it slid 1.1 m; GATMO then waits as after any
+    jump) or the anchor (it strayed 0.67 m). When both strayed, the localizer is started again
+    if it strayed more by ``anchor_odom_margin_m``. A shorter or smaller parting changes
+    nothing. The anchor gets the map's region updates too."""
     grid, truth, scans = _reloc_world(40)
     loc = StuckLocalizer(truth, offset, slip_at=10)
     loc.update_map_region = lambda cells, ix0, iy0: None
@@ -1026,6 +1032,8 @@ def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose
     stack.begin_run(1)
     out = [stack.step(s) for s in scans]
     assert anchor.regions == [((4, 5), 10, 12)]
+    assert anchor.restarts == ([] if anchor_restart_at is None else [anchor_restart_at])
+    assert stack.anchor_restarts == len(anchor.restarts)
     restarted = [i for i, o in enumerate(out) if o.relocalized]
     if restart_at is None:
         assert restarted == [] and loc.restarts == 0
