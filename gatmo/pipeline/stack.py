@@ -215,10 +215,11 @@ class FusionConfig(GatmoModel):
         "by more than anchor_gap_m on anchor_gap_updates of the localizer's updates in a row, "
         "the one that moved against odometry since they last agreed (within anchor_agree_m) "
         "is started again at the other's pose (relocalize_std_*): the localizer if it strayed "
-        "more than the anchor by anchor_odom_margin_m, and then GATMO waits "
-        "settle_after_jump_m; else the anchor. The sharp model's cloud can slide onto moved "
-        "furniture; the flat one gives each beam a bounded say, and where it is lost instead, "
-        "the wheels tell which of the two moved")
+        "more than the anchor by anchor_odom_margin_m and the anchor's pose explains the scan "
+        "nearly as well (at most anchor_fit_margin less of it within relocalize_fit_m of the "
+        "map), and then GATMO waits settle_after_jump_m; the anchor if it strayed more. The "
+        "sharp model's cloud can slide onto moved furniture; the flat one gives each beam a "
+        "bounded say, and where it is lost instead, the wheels tell which of the two moved")
     anchor_laser_model: Literal["likelihood_field", "likelihood_field_prob", "beam"] = Field(
         "likelihood_field", description="the anchor filter's sensor model (AMCL's default)")
     anchor_sigma_hit_m: float = Field(0.2, gt=0, description="the anchor filter's sigma_hit "
@@ -226,6 +227,7 @@ class FusionConfig(GatmoModel):
     anchor_gap_m: float = Field(0.4, gt=0, description="see anchor_filter")
     anchor_agree_m: float = Field(0.2, gt=0, description="see anchor_filter")
     anchor_odom_margin_m: float = Field(0.1, ge=0, description="see anchor_filter")
+    anchor_fit_margin: float = Field(0.1, ge=0, le=1, description="see anchor_filter")
     anchor_gap_updates: int = Field(5, ge=1, description="see anchor_filter")
     passes: int = Field(
         1, ge=1, le=4, description="passes over each log (offline): every pass after the "
@@ -520,13 +522,28 @@ class LocalizationStack:
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
+    def _fits(self, scan: Scan, pose_xytheta: np.ndarray) -> float:
+        """Fraction of the scan's points (5 cm voxels) within ``relocalize_fit_m`` of an edge
+        of the current map at the pose (:meth:`Relocalizer.fit`; 0 on a map without edges)."""
+        from gatmo.scanmatch.icp import voxel_downsample
+
+        if self._reloc is None:
+            self._reloc = Relocalizer(self.fusion)
+        if self._reloc_stale:
+            self._reloc.set_grid(self._map_grid())
+            self._reloc_stale = False
+        if not self._reloc.ready:
+            return 0.0
+        return self._reloc.fit(pose_xytheta, voxel_downsample(scan.points_base_xy(), 0.05))
+
     def _parted_from_anchor(self, est, loc_pose: np.ndarray, anchor_est,
-                            odom: np.ndarray) -> np.ndarray | None:
+                            odom: np.ndarray, scan: Scan) -> np.ndarray | None:
         """The anchor filter's pose (3,) if the localizer has parted from it (more than
         ``anchor_gap_m`` on ``anchor_gap_updates`` of its updates in a row, counted on this one)
         and moved against odometry since they last agreed by ``anchor_odom_margin_m`` more than
-        the anchor did; else None. Where the anchor is the one that moved, it is started again
-        at the localizer's pose."""
+        the anchor did, and the anchor's pose explains ``scan`` nearly as well
+        (``anchor_fit_margin``); else None. Where the anchor is the one that moved more, it is
+        started again at the localizer's pose."""
         if not getattr(est, "updated", True):
             return None
         f = self.fusion
@@ -546,8 +563,14 @@ class LocalizationStack:
         strayed_loc = np.hypot(*(compose(ref_loc, d_odom)[:2] - loc_pose[:2]))
         strayed_anchor = np.hypot(*(compose(ref_anchor, d_odom)[:2] - a[:2]))
         if strayed_loc > strayed_anchor + f.anchor_odom_margin_m:
+            # a filter may stray from the wheels to correct itself: the anchor's pose must also
+            # explain the scan nearly as well as the localizer's
+            if self._fits(scan, a) < self._fits(scan, loc_pose) - f.anchor_fit_margin:
+                return None
             self._anchor_ref = (a.copy(), a.copy(), odom.copy())
             return a
+        if strayed_anchor <= strayed_loc + f.anchor_odom_margin_m:
+            return None  # neither strayed clearly more: both stay
         s_xy, s_th = f.relocalize_std_xy_m, np.radians(f.relocalize_std_deg)
         self.anchor.set_initial_pose(loc_pose, np.diag([s_xy**2, s_xy**2, s_th**2]))
         self.anchor_restarts += 1
@@ -621,7 +644,7 @@ class LocalizationStack:
                 self._restart_at(found)
                 loc_pose = found
         if anchor_est is not None and not relocalized:
-            found = self._parted_from_anchor(est, loc_pose, anchor_est, odom)
+            found = self._parted_from_anchor(est, loc_pose, anchor_est, odom, scan)
             if found is not None:
                 relocalized = True
                 self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))

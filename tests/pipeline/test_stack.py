@@ -1062,3 +1062,39 @@ def test_the_anchor_filter_runs_the_localizers_parameters_with_a_flat_sensor_mod
     assert (a.alpha1, a.alpha2, a.max_particles) == (loc.alpha1, loc.alpha2, loc.max_particles)
     assert not np.array_equal(stack.anchor.particles, stack.localizer.particles)
     np.testing.assert_allclose(stack.anchor.particles.mean(axis=0)[:2], truth[0, :2], atol=0.02)
+
+
+class CorrectingLocalizer(StuckLocalizer):
+    """``offset`` off until scan ``slip_at``, then on the true pose: a filter that corrects
+    itself, against odometry."""
+
+    def update(self, odom, scan, withheld=None):
+        i = self.i
+        self.i += 1
+        pose = self.truth[i] + (self.offset if i < self.slip_at else 0.0)
+        return Est(pose, np.diag([self.std_m**2, self.std_m**2, 0.01**2]))
+
+
+@pytest.mark.parametrize("fit_margin, restart_at", [(0.1, None), (1.0, 14)])
+def test_a_filter_that_corrects_itself_is_not_sent_back_to_a_worse_anchor(fit_margin,
+                                                                         restart_at):
+    """Both filters start 0.5 m off, on either side of the truth; at scan 10 the localizer
+    corrects itself, moving against odometry. It strayed, but the anchor's pose explains the
+    scan worse than its own by more than ``anchor_fit_margin``: no restart (with the margin
+    at 1, the test off, it is sent to the anchor's wrong pose)."""
+    grid, truth, scans = _reloc_world(40)
+    loc = CorrectingLocalizer(truth, (0.4, 0.3, 0.0), slip_at=10)
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    anchor = AnchorStandIn(truth, range(40), bias=(-0.5, 0.0, 0.0))
+    stack = LocalizationStack(loc, None, _MapOnly(grid),
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
+                                           anchor_fit_margin=fit_margin), anchor=anchor)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    restarted = [i for i, o in enumerate(out) if o.relocalized]
+    assert restarted == ([] if restart_at is None else [restart_at])
+    assert anchor.restarts == [] and stack.anchor_restarts == 0
+    if restart_at is None:
+        err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out])[10:, :2]
+                         - truth[10:, :2]).T)
+        assert err.max() < 1e-9
