@@ -135,6 +135,17 @@ class FusionConfig(GatmoModel):
     3, 318 run 4). At 10 (thirty-eighth session) hall seed 410 went 0.50 -> 0.08 m ATE, and
     every other seed of 400-419, 100-109 and 300-319 stayed the same to the digit.
 
+    ``anchor_filter`` (off by default; beyond AMCL): a second filter with AMCL's flat
+    ``likelihood_field`` model runs beside the localizer on the same map and the raw scans. The
+    sharp model GATMO needs slides onto a moved piece that fits its returns (hall seed 403
+    run 3: 0.45 m in 3 s); the flat one, each beam's say bounded, seldom does. When they part
+    (``anchor_gap_m`` on ``anchor_gap_updates`` updates in a row), the one that moved against
+    odometry since they last agreed is started again at the other's pose, the localizer only
+    if the anchor's pose explains the scan nearly as well as its own (a filter correcting itself
+    strays from the wheels too). Where the localizer is right, the two part by at most
+    0.17-0.22 m (hall seeds 403, 412, 416); where the anchor is lost instead (seed 417 run 1,
+    0.9 m off), the wheels say so (docs/experiments.md, forty-fourth session).
+
     ``passes`` (1; offline, beyond the paper and AMCL): a log is run again, its localizer,
     alignment and relocalizer on the map the pass before ended with, fixed (the pieces that
     pass found moved, gone or new already where it left them), and its GATMO starting again
