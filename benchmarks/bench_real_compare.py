@@ -57,6 +57,9 @@ def real_log_config(demo_model: bool = False):
     # the two small relocations (8 and 10 cm, half a turn) and moved a third piece 0.38 m
     # instead (docs/experiments.md, thirty-sixth session): off here, as in GatmoConfig
     cfg.gatmo.match_extent_check = False
+    # the anchor filter runs AMCL's flat model beside a sharp one: beside the flat default it
+    # would be a second draw of the same filter
+    cfg.fusion.anchor_filter = demo_model
     return cfg
 
 

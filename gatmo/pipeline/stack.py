@@ -235,7 +235,7 @@ class FusionConfig(GatmoModel):
         "likelihood_field", description="the anchor filter's sensor model (AMCL's default)")
     anchor_sigma_hit_m: float = Field(0.2, gt=0, description="the anchor filter's sigma_hit "
                                       "(AMCL's default)")
-    anchor_gap_m: float = Field(0.4, gt=0, description="see anchor_filter")
+    anchor_gap_m: float = Field(0.3, gt=0, description="see anchor_filter")
     anchor_agree_m: float = Field(0.2, gt=0, description="see anchor_filter")
     anchor_odom_margin_m: float = Field(0.1, ge=0, description="see anchor_filter")
     anchor_fit_margin: float = Field(0.1, ge=0, le=1, description="see anchor_filter")

@@ -1007,7 +1007,7 @@ class _OneChange(_MapOnly):
 
 @pytest.mark.parametrize("offset, anchor_off, restart_at, anchor_restart_at", [
     ((0.9, -0.6, 0.1), (), 14, None),  # the filter slid 1.1 m: started again on its 5th update
-    ((0.3, 0.0, 0.0), (), None, None),  # 0.3 m apart: within anchor_gap_m
+    ((0.25, 0.0, 0.0), (), None, None),  # 0.25 m apart: within anchor_gap_m
     ((0.0, 0.0, 0.0), range(10, 14), None, None),  # the anchor strays for 4 updates only
     ((0.0, 0.0, 0.0), range(10, 40), None, 14),  # it strays for good: it is started again
     ((0.9, -0.6, 0.1), range(10, 40), 14, None),  # both stray: the one that strayed more
@@ -1015,7 +1015,7 @@ class _OneChange(_MapOnly):
 def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose(
         offset, anchor_off, restart_at, anchor_restart_at):
     """``anchor_filter``: a second filter on the same map with a flat sensor model. When the
-    localizer and it part by more than ``anchor_gap_m`` (0.4 m) on ``anchor_gap_updates`` (5)
+    localizer and it part by more than ``anchor_gap_m`` (0.3 m) on ``anchor_gap_updates`` (5)
     updates in a row, the one that moved against odometry since they last agreed is started
     again at the other's pose: the localizer (it slid 1.1 m; GATMO then waits as after any
     jump) or the anchor (it strayed 0.67 m). When both strayed, the localizer is started again
@@ -1052,7 +1052,9 @@ def test_the_anchor_filter_runs_the_localizers_parameters_with_a_flat_sensor_mod
     from gatmo.pipeline.runs import _make_mapper, make_full_stack
 
     cfg = sim_stack_config()
+    assert cfg.fusion.anchor_filter  # on in the simulated halls' configuration
     grid, truth, _ = _reloc_world(5)
+    cfg.fusion.anchor_filter = False
     assert make_full_stack(cfg, _make_mapper(cfg, grid, None), 3, truth[0]).anchor is None
     cfg.fusion.anchor_filter = True
     stack = make_full_stack(cfg, _make_mapper(cfg, grid, None), 3, truth[0])
