@@ -578,8 +578,7 @@ class LocalizationStack:
             # explain the scan nearly as well as the localizer's
             if self._fits(scan, a) < self._fits(scan, loc_pose) - f.anchor_fit_margin:
                 return None
-            self._anchor_ref = (a.copy(), a.copy(), odom.copy())
-            return a
+            return a  # the caller restarts the localizer there (_restart_at)
         if strayed_anchor <= strayed_loc + f.anchor_odom_margin_m:
             return None  # neither strayed clearly more: both stay
         s_xy, s_th = f.relocalize_std_xy_m, np.radians(f.relocalize_std_deg)
