@@ -538,14 +538,25 @@ class LocalizationStack:
         of the current map at the pose (:meth:`Relocalizer.fit`; 0 on a map without edges)."""
         from gatmo.scanmatch.icp import voxel_downsample
 
+        reloc = self._relocalizer()
+        if not reloc.ready:
+            return 0.0
+        return reloc.fit(pose_xytheta, voxel_downsample(scan.points_base_xy(), 0.05))
+
+    def _relocalizer(self) -> Relocalizer:
+        """The relocalizer's fit and search on the current map (built on first use, its map
+        refreshed after a change)."""
         if self._reloc is None:
             self._reloc = Relocalizer(self.fusion)
         if self._reloc_stale:
             self._reloc.set_grid(self._map_grid())
             self._reloc_stale = False
-        if not self._reloc.ready:
-            return 0.0
-        return self._reloc.fit(pose_xytheta, voxel_downsample(scan.points_base_xy(), 0.05))
+        return self._reloc
+
+    def _restart_cov(self) -> np.ndarray:
+        """(3, 3) covariance of a filter started again by the stack (relocalize_std_*)."""
+        s_xy, s_th = self.fusion.relocalize_std_xy_m, np.radians(self.fusion.relocalize_std_deg)
+        return np.diag([s_xy**2, s_xy**2, s_th**2])
 
     def _parted_from_anchor(self, est, loc_pose: np.ndarray, anchor_est,
                             odom: np.ndarray, scan: Scan) -> np.ndarray | None:
@@ -581,8 +592,7 @@ class LocalizationStack:
             return a  # the caller restarts the localizer there (_restart_at)
         if strayed_anchor <= strayed_loc + f.anchor_odom_margin_m:
             return None  # neither strayed clearly more: both stay
-        s_xy, s_th = f.relocalize_std_xy_m, np.radians(f.relocalize_std_deg)
-        self.anchor.set_initial_pose(loc_pose, np.diag([s_xy**2, s_xy**2, s_th**2]))
+        self.anchor.set_initial_pose(loc_pose, self._restart_cov())
         self.anchor_restarts += 1
         self._anchor_ref = (loc_pose.copy(), loc_pose.copy(), odom.copy())
         return None
@@ -590,8 +600,7 @@ class LocalizationStack:
     def _restart_at(self, pose_xytheta: np.ndarray) -> None:
         """Start the localizer again at a pose the stack found (relocalize_std_*); GATMO waits
         as after any jump, and the matcher and the published pose are re-anchored."""
-        s_xy, s_th = self.fusion.relocalize_std_xy_m, np.radians(self.fusion.relocalize_std_deg)
-        self.localizer.set_initial_pose(pose_xytheta, np.diag([s_xy**2, s_xy**2, s_th**2]))
+        self.localizer.set_initial_pose(pose_xytheta, self._restart_cov())
         self._settle_left_m = self.fusion.settle_after_jump_m
         self.T_map_match = None
         self._published_anchor = None
@@ -760,11 +769,7 @@ class LocalizationStack:
         from gatmo.scanmatch.icp import voxel_downsample
 
         f = self.fusion
-        if self._reloc is None:
-            self._reloc = Relocalizer(f)
-        if self._reloc_stale:
-            self._reloc.set_grid(self._map_grid())
-            self._reloc_stale = False
+        self._relocalizer()
         if self._reloc_odom is not None:
             self._reloc_travel_m += float(np.hypot(*relative(self._reloc_odom, odom)[:2]))
         self._reloc_odom = odom.copy()
