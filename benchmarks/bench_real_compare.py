@@ -89,6 +89,41 @@ def intel_reference_scans() -> list:
     return out
 
 
+LOGS = ("intel", "aces", "mit-csail")
+
+
+def stamp_shift_s(name: str) -> float:
+    """What the log's stamps add to its reference poses' stamps [s] (Intel's corrected log
+    counts from its start; the others' references come from the bag itself)."""
+    return INTEL_SHIFT_S if name == "intel" else 0.0
+
+
+def reference_scans(name: str) -> list:
+    """The log's scans with reference poses: Intel's from the corrected log
+    (:func:`intel_reference_scans`); ACES' and MIT CSAIL's the optimized poses of ``gatmo map
+    build`` on the bag (``bench-out/real_compare/<name>/gt.tum``, written by this benchmark),
+    one per scan. Stamps as in the bag."""
+    if name == "intel":
+        return intel_reference_scans()
+    from gatmo.datasets.open import open_log
+    from gatmo.datasets.tum import read_tum
+    from gatmo.geometry import nearest_index
+
+    gt = OUT / name / "gt.tum"
+    if not gt.exists():
+        raise FileNotFoundError(f"{gt}: run `python -m benchmarks.bench_real_compare --logs "
+                                f"{name}` first")
+    t_ref, poses = read_tum(gt)
+    scans = list(open_log(DATA / "slam-benchmark" / f"{name}.sort.bag", skip_bad=True))
+    t = np.array([s.stamp_s for s in scans])
+    k = nearest_index(t_ref, t)
+    out = []
+    for i in np.flatnonzero(np.abs(t_ref[k] - t) < 1e-3):  # the map build's poses are per scan
+        scans[i].gt_pose_xytheta = np.asarray(poses[k[i]], dtype=float)
+        out.append(scans[i])
+    return out
+
+
 def split_log(k: int, out: Path) -> list[Path]:
     """The Intel log cut into ``k`` CARMEN logs of equal scan counts, with the reference poses
     (``intel_reference_scans``) as their true poses; cached in ``out``."""
@@ -151,7 +186,11 @@ def main(argv=None) -> int:
     fig_path = OUT / "figures.json"
     if fig_path.exists():
         figures = json.loads(fig_path.read_text())
-    for name in args.logs.split(","):
+    names = args.logs.split(",")
+    unknown = sorted(set(names) - set(LOGS))
+    if unknown:
+        ap.error(f"--logs: unknown log(s) {', '.join(unknown)}; choose from {', '.join(LOGS)}")
+    for name in names:
         out = OUT / name
         out.mkdir(parents=True, exist_ok=True)
         map_yaml, gt, pose0 = _prepare(name, out)

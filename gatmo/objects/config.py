@@ -50,6 +50,22 @@ class GatmoConfig(GatmoModel):
     absence_margin_m: float = Field(0.15, ge=0, description="count only cells this far inside")
     absence_beyond_m: float = Field(0.4, gt=0, description="a return this far beyond = gone")
     hit_tolerance_m: float = Field(0.15, gt=0, description="a return this near = there")
+    absence_max_incidence_deg: float = Field(
+        90.0, gt=0, le=90, description="beyond the paper: a beam meeting the map's surface "
+        "more than this angle from its normal (grazing it, or running along a thin thing "
+        "end-on) is no evidence that an object is gone or there: a map built from scans has "
+        "such a surface a cell or two off, and a beam along a bench 2 cells thick passes its "
+        "cells while the bench stands (ACES; docs/experiments.md, forty-fifth session). 90: "
+        "every beam counts (the paper)")
+    absence_far_hits: bool = Field(
+        False, description="beyond the paper: beams ending on an object beyond "
+        "absence_max_range_m count against its absence (as beams ending on it nearer do), "
+        "though beams passing it there still do not count for it. Region growing joins a "
+        "wall's corner and a thing that stood beside it when the map was made; the beams "
+        "passing the near part where the thing has gone then sent the whole corner absent, "
+        "while the beams ending on its far part went uncounted (ACES; docs/experiments.md, "
+        "forty-fifth session). A heading error moves a far beam along a surface, but one "
+        "ending on the object still says something stands there")
     absence_min_beams: int = Field(8, ge=1, description="beams through it before absent")
     absence_through_fraction: float = Field(0.75, gt=0, le=1,
                                             description="of beams through or on it, through")

@@ -173,6 +173,7 @@ class GatmoMapper:
         self._rays: dict[int, int] = {}
         self._through: dict[int, int] = {}  # beams passing well beyond the object
         self._hits: dict[int, int] = {}  # beams ending on it
+        self._far_hits: dict[int, int] = {}  # ... beyond absence_max_range_m
         # beyond Alg. 1: the object's cells the map expects beams to end on (its surface as
         # seen this run), and those of them beams passed well beyond (not later hit)
         self._front: dict[int, set] = {}
@@ -279,6 +280,7 @@ class GatmoMapper:
             keep = occ[c[:, 1], c[:, 0]]
             self._owner[c[keep, 1], c[keep, 0]] = i
             self._local[c[keep, 1], c[keep, 0]] = k[keep]
+        self._normals = None  # the surface normals of this map, on first use
         if occ.any():
             dist, (iy, ix) = ndimage.distance_transform_edt(~occ, return_indices=True)
             self._near_dist = dist * g.resolution_m
@@ -801,6 +803,8 @@ class GatmoMapper:
             if o.id in self._seen:  # returns on the object: those cells are there
                 self._seen[o.id].difference_update(hit_loc[hit_own == i].tolist())
         touched = self._beam_evidence(beams)
+        if c.absence_far_hits:
+            self._count_far_hits(beams)
         back = {oid for oid in touched & self._withheld
                 if self._confirmed(self.object_map.by_id[oid])}
         if back:  # seen standing there: back into the localizer's map
@@ -814,6 +818,7 @@ class GatmoMapper:
             through, hits = self._through.get(oid, 0), self._hits.get(oid, 0)
             if through >= c.doubt_min_beams and through >= c.doubt_fraction * (through + hits):
                 self._doubt.add(oid)
+            hits += self._far_hits.get(oid, 0)  # (absence_far_hits; else none counted)
             if (max(self._gone_fractions(o)) > c.beta_thresh
                     and self._rays.get(oid, 0) >= c.absence_min_rays
                     and through >= c.absence_min_beams
@@ -884,6 +889,40 @@ class GatmoMapper:
         c = c[g.in_bounds(c)]
         np.add.at(self._hit_run, (c[:, 1], c[:, 0]), 1)
 
+    def _surface_normals(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per cell of the current map (H, W): the unit normal of the occupied surface (x and
+        y components; its sign is arbitrary), zero where the surface has no one direction
+        (a corner, a blob's inside, open space). The structure tensor of the occupied cells
+        blurred by a cell, over about 3 cells: the gradients on both sides of a wall one cell
+        thick point opposite ways, and their outer products agree on its normal."""
+        if self._normals is None:
+            occ = ndimage.gaussian_filter(self._grid.occupied.astype(np.float32), 1.0)
+            gy, gx = np.gradient(occ)
+            jxx = ndimage.gaussian_filter(gx * gx, 3.0)
+            jyy = ndimage.gaussian_filter(gy * gy, 3.0)
+            jxy = ndimage.gaussian_filter(gx * gy, 3.0)
+            tr = jxx + jyy
+            coherence = np.hypot(jxx - jyy, 2 * jxy) / np.maximum(tr, 1e-12)
+            theta = 0.5 * np.arctan2(2 * jxy, jxx - jyy)
+            ok = (tr > 1e-4) & (coherence > 0.5)
+            self._normals = (np.where(ok, np.cos(theta), 0.0), np.where(ok, np.sin(theta), 0.0))
+        return self._normals
+
+    def _grazing(self, u: np.ndarray, cells: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """(B,) bool: of the beams ``ok`` with directions ``u`` (B, 2) the map expects to end in
+        ``cells`` (B, 2), those meeting its surface more than ``absence_max_incidence_deg``
+        from the normal (:meth:`_surface_normals`)."""
+        out = np.zeros(len(u), dtype=bool)
+        if self.cfg.absence_max_incidence_deg >= 90.0 or not ok.any():
+            return out
+        nx, ny = self._surface_normals()
+        c = cells[ok]
+        n = np.stack([nx[c[:, 1], c[:, 0]], ny[c[:, 1], c[:, 0]]], axis=1)
+        cos_in = np.abs(np.sum(u[ok] * n, axis=1))
+        has = np.hypot(n[:, 0], n[:, 1]) > 0.5
+        out[ok] = has & (cos_in < np.cos(np.radians(self.cfg.absence_max_incidence_deg)))
+        return out
+
     def _classify_beams(self, lp, scan):
         """Per beam: (owner of the cell the map expects it to end on: object index, STRUCTURE
         or -1 for none, passes well beyond it, ends on it) — the ranges the current map
@@ -907,6 +946,10 @@ class GatmoMapper:
         own_deeper[inside] = self._owner[deeper[inside, 1], deeper[inside, 0]]
         through = ok & (r > expected + c.absence_beyond_m) & (own_deeper == own)
         on = ok & (np.abs(r - expected) <= c.hit_tolerance_m)
+        # a beam grazing the surface says nothing either way (absence_max_incidence_deg)
+        grazing = self._grazing(u, cells, ok)
+        through &= ~grazing
+        on &= ~grazing
         # a beam with no return reads the range limit and ended on nothing: near the limit
         # it used to count as ending on any object the map expected there, and a gone
         # piece the robot drove towards collected such hits until it could not be absent
@@ -972,6 +1015,16 @@ class GatmoMapper:
             self._front.setdefault(oid, set()).update(loc[m & (through | on)].tolist())
         return touched
 
+    def _count_far_hits(self, beams) -> None:
+        """``absence_far_hits``: add to the run's counts the beams ending on each object
+        beyond ``absence_max_range_m`` (:meth:`_classify_beams`)."""
+        own, _, _, on, own_near = beams[:5]
+        far = on & (own >= 0) & (own_near < 0)
+        objs = self.object_map.objects
+        for i, n in zip(*np.unique(own[far], return_counts=True), strict=True):
+            oid = objs[int(i)].id
+            self._far_hits[oid] = self._far_hits.get(oid, 0) + int(n)
+
     def _gone_fractions(self, o: MapObject) -> tuple[float, float]:
         """(Alg. 1's fraction of the core cells seen through this run, the fraction of the
         surface the beams should have ended on that they passed). Beyond Alg. 1, the second:
@@ -1001,7 +1054,7 @@ class GatmoMapper:
         }
 
     def _clear_evidence(self, oid: int) -> None:
-        for d in (self._seen, self._rays, self._through, self._hits, self._front,
+        for d in (self._seen, self._rays, self._through, self._hits, self._far_hits, self._front,
                   self._front_through, self._nudge_cells, self._nudge_scans, self._nudge_views,
                   self._nudge_tried):
             d.pop(oid, None)

@@ -109,6 +109,48 @@ def test_object_seen_only_from_its_near_side_at_the_range_limit_becomes_absent()
     assert [(e.kind, e.object_id) for e in events] == [("absent", desk.id)]
 
 
+@pytest.mark.parametrize("far_hits, absent", [(False, True), (True, False)])
+def test_an_object_whose_far_part_stands_is_not_absent_with_absence_far_hits(far_hits, absent):
+    # region growing joined a block 4-5 m from the laser with a wall piece behind it, 5.05 m
+    # off; the block has gone. Its beams run on to the wall piece, the only beams within
+    # absence_max_range_m (5 m), so the near evidence says the whole object is gone; the
+    # beams ending on the wall piece beyond 5 m say part of it stands
+    near, far = (5.0, 2.5, 6.05, 3.0), (6.05, 1.5, 6.4, 4.0)
+    cfg = CFG.model_copy(update={"absence_far_hits": far_hits})
+    m = GatmoMapper.from_config(cfg, room_grid(12, 5.5, 0.05, boxes=[near, far]))
+    m.begin_run(1)
+    obj = [o for o in m.object_map.objects if not o.structure]
+    assert len(obj) == 1  # one object, the two boxes touching
+    world = room_grid(12, 5.5, 0.05, boxes=[far])
+    path = [(1.0, y, 0.0) for y in np.linspace(2.6, 2.9, 12)]
+    kinds = [(e.kind, e.object_id) for e in _drive(m, world, path, max_range_m=10.0)]
+    assert kinds == ([("absent", obj[0].id)] if absent else [])
+    through = m.absence_evidence(obj[0].id)["beams_through"]
+    assert through >= (0 if absent else CFG.absence_min_beams)
+
+
+@pytest.mark.parametrize("max_incidence_deg, absent", [(90.0, True), (75.0, False)])
+def test_a_bench_seen_end_on_is_not_absent_with_absence_max_incidence_deg(max_incidence_deg,
+                                                                         absent):
+    # a bench 2 cells thick that the map has 2 cells to the side of where it stands, as a map
+    # built from scans may have a thin thing; the robot looks along it from its end, so the
+    # beams the map expects to end on its end run along its length beside it and on to the
+    # wall, as if it had gone (ACES, object 152). Meeting its surface at about 90 deg from
+    # the normal, they are no evidence with absence_max_incidence_deg
+    cfg = CFG.model_copy(update={"absence_max_incidence_deg": max_incidence_deg})
+    m = GatmoMapper.from_config(cfg, room_grid(10, 5, 0.05, boxes=[(3.0, 2.5, 4.2, 2.58)]))
+    m.begin_run(1)
+    bench = [o for o in m.object_map.objects if not o.structure][0]
+    world = room_grid(10, 5, 0.05, boxes=[(3.0, 2.61, 4.2, 2.69)])
+    path = [(x, 2.525, np.pi) for x in np.linspace(7.0, 6.0, 30)]
+    kinds = [(e.kind, e.object_id) for e in _drive(m, world, path, max_range_m=10.0,
+                                                   n_beams=181)]
+    assert kinds == ([("absent", bench.id)] if absent else [])
+    if not absent:  # the beams said nothing either way
+        ev = m.absence_evidence(bench.id)
+        assert ev["beams_through"] == ev["beams_on"] == 0 and ev["rays"] > 0
+
+
 @pytest.mark.parametrize("margin_m, relocated", [(0.7, False), (0.0, True)])
 def test_desk_cut_by_the_range_limit_is_not_taken_for_a_smaller_box(margin_m, relocated):
     # a 0.5 m box is gone; a 1.4 m desk stands across the laser's 4 m range limit, so only its
