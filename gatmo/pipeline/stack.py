@@ -172,7 +172,7 @@ class FusionConfig(GatmoModel):
         "gatmo_pose_carry_m": 0.0, "motion_from_matcher": False,
         "matcher_motion_max_gap_m": 0.2, "matcher_motion_max_gap_deg": 10.0,
         "bridge_evidence": False, "bridge_max_closure_m": 0.02, "bridge_max_closure_deg": 1.0,
-        "bridge_max_travel_m": 3.0}
+        "bridge_max_travel_m": 3.0, "anchor_gates_gatmo": False, "anchor_gate_gap_m": 0.15}
 
     use_scan_matcher: bool = True
     publish_pose: Literal["localizer", "fused", "aligned"] = "aligned"
@@ -240,11 +240,6 @@ class FusionConfig(GatmoModel):
     anchor_odom_margin_m: float = Field(0.1, ge=0, description="see anchor_filter")
     anchor_fit_margin: float = Field(0.1, ge=0, le=1, description="see anchor_filter")
     anchor_gap_updates: int = Field(5, ge=1, description="see anchor_filter")
-    anchor_gates_gatmo: bool = Field(
-        False, description="with anchor_filter: GATMO is handed no scan on which the localizer "
-        "and the anchor filter are more than anchor_gate_gap_m apart. Two filters that "
-        "disagree put the pose in doubt, and absence and matching need a precise one")
-    anchor_gate_gap_m: float = Field(0.15, gt=0, description="see anchor_gates_gatmo")
     passes: int = Field(
         1, ge=1, le=4, description="passes over each log (offline): every pass after the "
         "first localizes on the map the pass before ended with, fixed, and GATMO starts again "
@@ -481,7 +476,6 @@ class LocalizationStack:
         # (localizer pose, anchor pose, odometry) at the last update the two agreed on
         self._anchor_ref: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.anchor_restarts = 0  # the anchor started again at the localizer's pose
-        self.anchor_gated = 0  # scans kept from GATMO as the two filters disagreed
         # a fixed map for the localizer, the alignment and the relocalizer (a second pass,
         # ``fusion.passes``); None: GATMO's current map, updated as it changes
         self.loc_grid = loc_grid
@@ -602,16 +596,6 @@ class LocalizationStack:
         self.anchor_restarts += 1
         self._anchor_ref = (loc_pose.copy(), loc_pose.copy(), odom.copy())
         return None
-
-    def _anchor_disagrees(self, anchor_est, loc_pose: np.ndarray) -> bool:
-        """``anchor_gates_gatmo``: the anchor filter's pose is more than ``anchor_gate_gap_m``
-        from the localizer's ``loc_pose`` (3,) on this scan. On hall seeds 403, 405 and 412,
-        of the scans GATMO was handed with a pose 0.2 m or more off, 83-100 % were such scans;
-        of those within 0.1 m, 1-2 % (docs/experiments.md, forty-fifth session)."""
-        if anchor_est is None or not self.fusion.anchor_gates_gatmo:
-            return False
-        a = np.asarray(anchor_est.pose_xytheta, dtype=float)
-        return bool(np.hypot(*(a[:2] - loc_pose[:2])) > self.fusion.anchor_gate_gap_m)
 
     def _restart_at(self, pose_xytheta: np.ndarray) -> None:
         """Start the localizer again at a pose the stack found (relocalize_std_*); GATMO waits
@@ -738,9 +722,6 @@ class LocalizationStack:
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
             pose_ok = pose_ok and self._settle_left_m <= 0.0
-            if pose_ok and self._anchor_disagrees(anchor_est, loc_pose):
-                pose_ok = False
-                self.anchor_gated += 1
             map_pose = pose
             verified = pose_ok
             if self.fusion.align_to_map and self._aligner is None:

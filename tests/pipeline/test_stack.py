@@ -1045,33 +1045,6 @@ def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose
     assert all(o.gatmo_pose_xytheta is None for o in out[restart_at:restart_at + 20])
 
 
-@pytest.mark.parametrize("gate, bias, gated", [
-    (True, (0.2, 0.0, 0.0), [10, 11, 12, 13]),  # 0.2 m apart on scans 10-13: GATMO waits
-    (True, (0.1, 0.0, 0.0), []),  # 0.1 m apart: within anchor_gate_gap_m
-    (False, (0.2, 0.0, 0.0), []),  # the gate off
-])
-def test_gatmo_is_handed_no_scan_on_which_the_two_filters_disagree(gate, bias, gated):
-    """``anchor_gates_gatmo``: where the localizer and the anchor filter are more than
-    ``anchor_gate_gap_m`` (0.15 m) apart, the pose is in doubt and GATMO is not handed the
-    scan; a parting below ``anchor_gap_m`` restarts neither filter."""
-    grid = room_grid(12, 6, 0.05)
-    truth = _STRAIGHT[:20]
-    scans = [make_scan(grid, p, odom_pose_xytheta=p, stamp_s=0.1 * i)
-             for i, p in enumerate(truth)]
-    mapper = RecordingMapper(grid)
-    fusion = FusionConfig(use_scan_matcher=False, mask_unexplained=False, align_to_map=False,
-                          mask_offset_objects=False, anchor_filter=True,
-                          anchor_gates_gatmo=gate)
-    anchor = AnchorStandIn(truth, range(10, 14), bias=bias)
-    stack = LocalizationStack(ScriptedLocalizer(truth, confident_at=range(20)), None, mapper,
-                              fusion, anchor=anchor)
-    stack.begin_run(1)
-    out = [stack.step(s) for s in scans]
-    assert [i for i, t in enumerate(mapper.trusted) if not t] == gated
-    assert stack.anchor_gated == len(gated)
-    assert anchor.restarts == [] and not any(o.relocalized for o in out)
-
-
 def test_the_anchor_filter_runs_the_localizers_parameters_with_a_flat_sensor_model():
     """``make_full_stack`` builds the anchor from the stack's ``amcl`` section with
     ``anchor_laser_model`` and ``anchor_sigma_hit_m``, and its own random draw."""
