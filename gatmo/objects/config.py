@@ -53,7 +53,8 @@ class GatmoConfig(GatmoModel):
     absence_max_incidence_deg: float = Field(
         90.0, gt=0, le=90, description="beyond the paper: a beam meeting the map's surface "
         "more than this angle from its normal (grazing it, or running along a thin thing "
-        "end-on) is no evidence that an object is gone or there: a map built from scans has "
+        "end-on) is no evidence that an object is gone or there (nor counts in the scan's "
+        "agreement with the map): a map built from scans has "
         "such a surface a cell or two off, and a beam along a bench 2 cells thick passes its "
         "cells while the bench stands (ACES; docs/experiments.md, forty-fifth session). 90: "
         "every beam counts (the paper)")
