@@ -34,8 +34,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
     from gatmo.pipeline.evaluate import map_census, score_run, tie_objects
-    from gatmo.pipeline.runs import make_localizer, make_matcher
-    from gatmo.pipeline.stack import LocalizationStack
+    from gatmo.pipeline.runs import make_full_stack, make_localizer
 
     tmp = tmp or Path(tempfile.mkdtemp())
     sim = SimConfig.for_preset("hall")
@@ -53,9 +52,8 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
         # notice gone in it (stale_why, below)
         stale0 = map_census(mapper.object_map, ties, doc, k + 1)["stale_ids"]
         seen0 = mapper.counts["seen_through_scans"]
-        stack = LocalizationStack(
-            make_localizer(cfg, mapper.localizer_grid(), k, scans[0].gt_pose_xytheta, False),
-            make_matcher(cfg), mapper, cfg.fusion)
+        # the stack as `gatmo compare` builds it (the anchor filter too, where it is on)
+        stack = make_full_stack(cfg, mapper, k, scans[0].gt_pose_xytheta)
         stack.begin_run(k + 1)
         t0 = time.perf_counter()
         err = []
