@@ -30,7 +30,7 @@ from pydantic import Field
 from gatmo.config import GatmoModel
 from gatmo.datasets.types import Scan
 from gatmo.geometry import compose, inverse, relative, transform_points, wrap_angle
-from gatmo.maps.grid import OccupancyGrid
+from gatmo.maps.grid import OCCUPIED, OccupancyGrid
 
 
 class FusionConfig(GatmoModel):
@@ -429,6 +429,17 @@ def _wrapped(pose_xytheta) -> np.ndarray:
     return np.array([pose_xytheta[0], pose_xytheta[1], float(wrap_angle(pose_xytheta[2]))])
 
 
+def _startable_at(filt, pose_xytheta) -> bool:
+    """A particle filter may be started again at ``pose_xytheta`` (3,): on its map and not in an
+    occupied cell, which ``set_initial_pose`` refuses (a lost filter's pose can be in a wall:
+    the 50-run soak, chain 12). A filter without a map (a test's stand-in) may anywhere."""
+    grid = getattr(filt, "grid", None)
+    if not isinstance(grid, OccupancyGrid):
+        return True
+    cell = grid.world_to_cell(np.asarray(pose_xytheta, dtype=float)[None, :2])
+    return bool(grid.in_bounds(cell)[0] and grid.cells[cell[0, 1], cell[0, 0]] != OCCUPIED)
+
+
 def _injected(localizer) -> int:
     """Random particles the localizer has injected so far (AMCL's recovery; 0 if it does not
     count them)."""
@@ -589,9 +600,13 @@ class LocalizationStack:
             # explain the scan nearly as well as the localizer's
             if self._fits(scan, a) < self._fits(scan, loc_pose) - f.anchor_fit_margin:
                 return None
+            if not _startable_at(self.localizer, a):
+                return None
             return a  # the caller restarts the localizer there (_restart_at)
         if strayed_anchor <= strayed_loc + f.anchor_odom_margin_m:
             return None  # neither strayed clearly more: both stay
+        if not _startable_at(self.anchor, loc_pose):
+            return None  # (a lost localizer's pose can be in a wall: that is no place to go)
         self.anchor.set_initial_pose(loc_pose, self._restart_cov())
         self.anchor_restarts += 1
         self._anchor_ref = (loc_pose.copy(), loc_pose.copy(), odom.copy())
@@ -657,6 +672,8 @@ class LocalizationStack:
                 and callable(getattr(self.mapper, "grid", None))
                 and callable(getattr(self.localizer, "set_initial_pose", None))):
             found = self._relocalized(masked, loc_pose, odom)
+            if found is not None and not _startable_at(self.localizer, found):
+                found = None
             relocalized = found is not None
             if found is not None:
                 self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))

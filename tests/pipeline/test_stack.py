@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from gatmo.geometry import compose, relative
+from gatmo.maps.grid import OCCUPIED, OccupancyGrid
 from gatmo.pipeline.stack import FusionConfig, LocalizationStack, is_confident
 from tests.helpers import make_scan, room_grid
 
@@ -1043,6 +1044,26 @@ def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose
     np.testing.assert_allclose(out[restart_at].localizer_pose_xytheta, expect, atol=1e-9)
     assert len(stack.relocalizations) == 1
     assert all(o.gatmo_pose_xytheta is None for o in out[restart_at:restart_at + 20])
+
+
+def test_no_filter_is_started_again_in_a_wall():
+    """A filter is not started again at a pose its map has occupied (``set_initial_pose``
+    refuses one, and a lost filter's pose can be in a wall): the anchor that strayed for good
+    (the case above where it is started again) stays where it is, and the run goes on."""
+    grid, truth, scans = _reloc_world(40)
+    walled = OccupancyGrid(grid.cells.copy(), grid.resolution_m, grid.origin_xytheta)
+    c = walled.world_to_cell(truth[:, :2])
+    walled.cells[c[:, 1], c[:, 0]] = OCCUPIED  # the localizer's poses: all in a wall
+    loc = StuckLocalizer(truth, (0.0, 0.0, 0.0), slip_at=10)
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    anchor = AnchorStandIn(truth, range(10, 40), bias=(0.6, 0.3, 0.0))
+    anchor.grid = walled
+    stack = LocalizationStack(loc, None, _OneChange(grid),
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True),
+                              anchor=anchor)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    assert len(out) == 40 and anchor.restarts == [] and stack.anchor_restarts == 0
 
 
 def test_the_anchor_filter_runs_the_localizers_parameters_with_a_flat_sensor_model():
