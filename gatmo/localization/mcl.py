@@ -128,15 +128,22 @@ class MonteCarloLocalizer:
         c = self.cfg
         return np.diag([c.initial_cov_xx_m2, c.initial_cov_yy_m2, c.initial_cov_aa_rad2])
 
+    def start_refusal(self, pose_xytheta) -> str | None:
+        """Why :meth:`set_initial_pose` would refuse the map pose (3,): "outside the map", "in
+        an occupied cell", or None if it would not."""
+        cell = self.grid.world_to_cell(np.asarray(pose_xytheta, dtype=float)[None, :2])
+        if not self.grid.in_bounds(cell)[0]:
+            return "outside the map"
+        if self.grid.cells[cell[0, 1], cell[0, 0]] == OCCUPIED:
+            return "in an occupied cell"
+        return None
+
     def set_initial_pose(self, pose_xytheta, cov: np.ndarray | None = None) -> None:
         """Gaussian particle cloud around a map pose; refuses poses off the map or in a wall."""
         pose = np.asarray(pose_xytheta, dtype=float)
-        cell = self.grid.world_to_cell(pose[None, :2])
-        if not self.grid.in_bounds(cell)[0]:
-            raise MapError(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}) is outside the map",
-                           field="initial_pose")
-        if self.grid.cells[cell[0, 1], cell[0, 0]] == OCCUPIED:
-            raise MapError(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}) is in an occupied cell",
+        why = self.start_refusal(pose)
+        if why is not None:
+            raise MapError(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}) is {why}",
                            field="initial_pose")
         cov = self.initial_cov() if cov is None else np.asarray(cov, dtype=float)
         n = self.cfg.max_particles

@@ -30,7 +30,7 @@ from pydantic import Field
 from gatmo.config import GatmoModel
 from gatmo.datasets.types import Scan
 from gatmo.geometry import compose, inverse, relative, transform_points, wrap_angle
-from gatmo.maps.grid import OCCUPIED, OccupancyGrid
+from gatmo.maps.grid import OccupancyGrid
 
 
 class FusionConfig(GatmoModel):
@@ -430,14 +430,11 @@ def _wrapped(pose_xytheta) -> np.ndarray:
 
 
 def _startable_at(filt, pose_xytheta) -> bool:
-    """A particle filter may be started again at ``pose_xytheta`` (3,): on its map and not in an
-    occupied cell, which ``set_initial_pose`` refuses (a lost filter's pose can be in a wall:
-    the 50-run soak, chain 12). A filter without a map (a test's stand-in) may anywhere."""
-    grid = getattr(filt, "grid", None)
-    if not isinstance(grid, OccupancyGrid):
-        return True
-    cell = grid.world_to_cell(np.asarray(pose_xytheta, dtype=float)[None, :2])
-    return bool(grid.in_bounds(cell)[0] and grid.cells[cell[0, 1], cell[0, 0]] != OCCUPIED)
+    """A particle filter may be started again at ``pose_xytheta`` (3,): its ``start_refusal``
+    has nothing against it (a lost filter's pose can be in a wall: the 50-run soak, chain 12).
+    A filter that gives no reasons (a test's stand-in) may anywhere."""
+    refusal = getattr(filt, "start_refusal", None)
+    return refusal is None or refusal(pose_xytheta) is None
 
 
 def _injected(localizer) -> int:
@@ -544,15 +541,12 @@ class LocalizationStack:
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
-    def _fits(self, scan: Scan, pose_xytheta: np.ndarray) -> float:
-        """Fraction of the scan's points (5 cm voxels) within ``relocalize_fit_m`` of an edge
-        of the current map at the pose (:meth:`Relocalizer.fit`; 0 on a map without edges)."""
-        from gatmo.scanmatch.icp import voxel_downsample
-
+    def _fits(self, points_base_xy: np.ndarray, *poses_xytheta: np.ndarray) -> list[float]:
+        """Per pose, the fraction of the points (N, 2) (base frame, 5 cm voxels) within
+        ``relocalize_fit_m`` of an edge of the current map (:meth:`Relocalizer.fit`; 0 on a
+        map without edges)."""
         reloc = self._relocalizer()
-        if not reloc.ready:
-            return 0.0
-        return reloc.fit(pose_xytheta, voxel_downsample(scan.points_base_xy(), 0.05))
+        return [reloc.fit(p, points_base_xy) if reloc.ready else 0.0 for p in poses_xytheta]
 
     def _relocalizer(self) -> Relocalizer:
         """The relocalizer's fit and search on the current map (built on first use, its map
@@ -598,7 +592,11 @@ class LocalizationStack:
         if strayed_loc > strayed_anchor + f.anchor_odom_margin_m:
             # a filter may stray from the wheels to correct itself: the anchor's pose must also
             # explain the scan nearly as well as the localizer's
-            if self._fits(scan, a) < self._fits(scan, loc_pose) - f.anchor_fit_margin:
+            from gatmo.scanmatch.icp import voxel_downsample
+
+            fit_a, fit_loc = self._fits(voxel_downsample(scan.points_base_xy(), 0.05), a,
+                                        loc_pose)
+            if fit_a < fit_loc - f.anchor_fit_margin:
                 return None
             if not _startable_at(self.localizer, a):
                 return None
@@ -612,9 +610,12 @@ class LocalizationStack:
         self._anchor_ref = (loc_pose.copy(), loc_pose.copy(), odom.copy())
         return None
 
-    def _restart_at(self, pose_xytheta: np.ndarray) -> None:
-        """Start the localizer again at a pose the stack found (relocalize_std_*); GATMO waits
-        as after any jump, and the matcher and the published pose are re-anchored."""
+    def _restart_at(self, pose_xytheta: np.ndarray, stamp_s: float,
+                    from_xytheta: np.ndarray) -> None:
+        """Start the localizer again at a pose the stack found (relocalize_std_*), recorded in
+        :attr:`relocalizations` with the pose it leaves; GATMO waits as after any jump, and the
+        matcher and the published pose are re-anchored."""
+        self.relocalizations.append((float(stamp_s), from_xytheta.copy(), pose_xytheta.copy()))
         self.localizer.set_initial_pose(pose_xytheta, self._restart_cov())
         self._settle_left_m = self.fusion.settle_after_jump_m
         self.T_map_match = None
@@ -675,17 +676,12 @@ class LocalizationStack:
             if found is not None and not _startable_at(self.localizer, found):
                 found = None
             relocalized = found is not None
-            if found is not None:
-                self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))
-                self._restart_at(found)
-                loc_pose = found
         if anchor_est is not None and not relocalized:
             found = self._parted_from_anchor(est, loc_pose, anchor_est, odom, scan)
-            if found is not None:
-                relocalized = True
-                self.relocalizations.append((float(scan.stamp_s), loc_pose.copy(), found.copy()))
-                self._restart_at(found)
-                loc_pose = found
+            relocalized = found is not None
+        if relocalized:
+            self._restart_at(found, scan.stamp_s, loc_pose)
+            loc_pose = found
         self._last_loc, self._last_odom = loc_pose, odom
         self._last_precise = is_confident(est, self.fusion, strict=True, require_update=False)
         reset = False

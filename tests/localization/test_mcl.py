@@ -127,6 +127,11 @@ def test_initial_pose_in_wall_or_off_map_is_refused(office):
     wall = grid.occupied_cells_world()[0]
     with pytest.raises(MapError):
         loc.set_initial_pose([wall[0], wall[1], 0.0])
+    # the same reasons, asked before (the stack does, before it starts a filter again)
+    assert loc.start_refusal([-100.0, 0.0, 0.0]) == "outside the map"
+    assert loc.start_refusal([wall[0], wall[1], 0.0]) == "in an occupied cell"
+    free = grid.free_cells_world()[0]
+    assert loc.start_refusal([free[0], free[1], 0.0]) is None
 
 
 def test_ros1_params(tmp_path):

@@ -1057,7 +1057,10 @@ def test_no_filter_is_started_again_in_a_wall():
     loc = StuckLocalizer(truth, (0.0, 0.0, 0.0), slip_at=10)
     loc.update_map_region = lambda cells, ix0, iy0: None
     anchor = AnchorStandIn(truth, range(10, 40), bias=(0.6, 0.3, 0.0))
-    anchor.grid = walled
+    # its map has them occupied, as MonteCarloLocalizer.start_refusal would say
+    anchor.start_refusal = lambda pose: (
+        "in an occupied cell" if walled.value_at(np.asarray(pose)[None, :2])[0] == OCCUPIED
+        else None)
     stack = LocalizationStack(loc, None, _OneChange(grid),
                               FusionConfig(use_scan_matcher=False, anchor_filter=True),
                               anchor=anchor)
