@@ -378,8 +378,13 @@ def config_dump(
     params: Annotated[
         Path | None, typer.Option("--params", help="Load this file first (e.g. ROS AMCL YAML).")
     ] = None,
+    comments: Annotated[
+        bool, typer.Option("--comments/--no-comments",
+                           help="Write each parameter's description above it.")
+    ] = True,
 ) -> None:
-    """Print a component's full configuration as YAML (defaults, or as loaded from --params)."""
+    """Print a component's full configuration as YAML (defaults, or as loaded from --params),
+    each parameter with its description as a comment."""
     from gatmo.config import dump_model
     from gatmo.errors import ConfigError
 
@@ -406,7 +411,7 @@ def config_dump(
         raise ConfigError(
             f"unknown component {component!r}: amcl | gatmo | sim | stack", field="component"
         )
-    sys.stdout.write(dump_model(cfg))
+    sys.stdout.write(dump_model(cfg, comments=comments))
 
 
 # --------------------------------------------------------------------- map render

@@ -150,6 +150,34 @@ def load_model(model: type[M], path: str | Path, *, section: str | None = None) 
         ) from None
 
 
-def dump_model(cfg: BaseModel) -> str:
-    """YAML text of a model, every field written out (defaults included)."""
-    return yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
+def dump_model(cfg: BaseModel, *, comments: bool = False) -> str:
+    """YAML text of a model, every field written out (defaults included). ``comments``: each
+    key is preceded by its field's description as ``#`` lines, wrapped at 100 columns (what a
+    user editing the file needs; the values and the data loaded back are the same)."""
+    data = cfg.model_dump(mode="json")
+    if not comments:
+        return yaml.safe_dump(data, sort_keys=False)
+    lines: list[str] = []
+    _commented(cfg, data, 0, lines)
+    return "\n".join(lines) + "\n"
+
+
+def _commented(cfg: BaseModel, data: dict, indent: int, lines: list[str]) -> None:
+    """Append the YAML lines of ``data`` (``cfg`` dumped) to ``lines``, every key after its
+    description as comments, nested models indented under their key."""
+    import textwrap
+
+    pad = " " * indent
+    for name, field in type(cfg).model_fields.items():
+        if name not in data:
+            continue
+        if field.description:
+            width = max(40, 100 - indent - 2)
+            lines += [f"{pad}# {t}" for t in textwrap.wrap(field.description, width)]
+        value = getattr(cfg, name)
+        if isinstance(value, BaseModel):
+            lines.append(f"{pad}{name}:")
+            _commented(value, data[name], indent + 2, lines)
+        else:
+            text = yaml.safe_dump({name: data[name]}, sort_keys=False).rstrip("\n")
+            lines += [pad + t for t in text.split("\n")]

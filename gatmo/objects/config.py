@@ -30,19 +30,42 @@ class GatmoConfig(GatmoModel):
         "match_gamma_to_absent": False, "match_gamma_strict": False,
         "part_ring_connected": False, "part_ring_min_cells": 3, "match_gamma_part_check": False,
         "match_extent_record": False, "match_rank_extent": False,
-        "match_absence_reclaims": False, "match_gamma_beam_check": False}
+        "match_absence_reclaims": False, "match_gamma_beam_check": False,
+        # read by nothing since the chair / person verdict stopped using the Kalman filter's
+        # speed and the coarse search turned by a fixed +-6 deg (forty-sixth session)
+        "chair_max_speed_mps": 0.15, "match_search_deg": 12.0}
 
-    delta_R_m: float = Field(0.05, gt=0)
-    delta_W_m: float = Field(0.15, gt=0)
-    beta_thresh: float = Field(0.6, gt=0, lt=1)
-    tau_memory_s: float = Field(4.0, gt=0)
-    beta_min_prob: float = Field(0.02, gt=0, lt=1)
+    delta_R_m: float = Field(
+        0.05, gt=0, description="the paper's delta_R: the person hypothesis integrates its "
+        "Kalman filter's normal over a square of side 2 delta_R around each return (P(x_k|p_j)). "
+        "The paper's grid side; the grids here take the map's resolution")
+    delta_W_m: float = Field(
+        0.15, gt=0, description="the paper's delta_W (the neighbourhood N_i): returns within "
+        "this of an occupied map cell are explained by the map (S_free) and not tracked; also "
+        "how near a chair's cells must lie to a Gamma object to be the same one")
+    beta_thresh: float = Field(
+        0.6, gt=0, lt=1, description="the paper's beta_thresh (Alg. 1): an object is marked "
+        "absent when more than this fraction of its core cells was seen through this run (or "
+        "of the surface cells beams should have ended on was passed), and absence_min_rays, "
+        "absence_min_beams and absence_through_fraction are met")
+    tau_memory_s: float = Field(
+        4.0, gt=0, description="the paper's tau_memory: a metaobject not seen for longer than "
+        "this is discarded; an unmatched chair then joins Gamma")
+    beta_min_prob: float = Field(
+        0.02, gt=0, lt=1, description="the paper's beta_min_prob: the probability per point "
+        "of the new-object hypothesis m_new; a cluster no metaobject explains better starts a "
+        "new one")
     # object map
     wall_min_extent_m: float = Field(2.5, gt=0, description="larger objects are structure")
     min_object_cells: int = Field(6, ge=1, description="smaller specks are structure")
     # absence (Alg. 1), made robust
-    absence_exclude_end_m: float = Field(0.12, ge=0)
-    absence_min_rays: int = Field(20, ge=1)
+    absence_exclude_end_m: float = Field(
+        0.12, ge=0, description="cells within this of a ray's return are not counted as "
+        "crossed by it (seen free, seen through, passed): a return on an object is not a ray "
+        "through it")
+    absence_min_rays: int = Field(
+        20, ge=1, description="rays that must have crossed an object's cells this run before "
+        "it may be marked absent")
     absence_max_range_m: float = Field(5.0, gt=0, description="rays and beams beyond: no evidence")
     absence_near_m: float = Field(0.35, gt=0,
                                   description="returns this near an object: it is there")
@@ -71,7 +94,10 @@ class GatmoConfig(GatmoModel):
     absence_through_fraction: float = Field(0.75, gt=0, le=1,
                                             description="of beams through or on it, through")
     doubt_min_beams: int = Field(4, ge=1, description="beams through it before in doubt")
-    doubt_fraction: float = Field(0.2, gt=0, le=1)
+    doubt_fraction: float = Field(
+        0.2, gt=0, le=1, description="of the beams passing or ending on an object this run, "
+        "the fraction passing through that puts it in doubt (with doubt_min_beams): returns "
+        "near it are then no longer explained by the map, so a track can show where it is now")
     doubt_search_m: float = Field(1.5, gt=0, description="how far a doubted object may shift")
     confirm_min_beams: int = Field(10, ge=1, description="beams on a movable object: it is there")
     min_agreement: float = Field(0.75, ge=0, le=1,
@@ -105,9 +131,16 @@ class GatmoConfig(GatmoModel):
     min_explained_fraction: float = Field(0.3, ge=0, le=1,
                                           description="returns the map explains, else skip")
     # unexplained returns
-    meanshift_bandwidth_m: float = Field(0.35, gt=0)
-    min_cluster_points: int = Field(3, ge=1)
-    gate_m: float = Field(1.0, gt=0)
+    meanshift_bandwidth_m: float = Field(
+        0.35, gt=0, description="radius of the flat mean shift kernel that splits a scan's "
+        "unexplained returns into clusters; modes closer than half of it are merged")
+    min_cluster_points: int = Field(
+        3, ge=1, description="returns a cluster needs to be tracked; a scan with fewer "
+        "unexplained returns is not clustered")
+    gate_m: float = Field(
+        1.0, gt=0, description="a cluster is compared only with metaobjects whose Kalman "
+        "centre lies within this of its mean, or whose evidence cells lie within a third of it "
+        "of one of its returns")
     track_max_range_m: float = Field(5.0, gt=0,
                                      description="farther returns are too sparse to track")
     track_range_margin_m: float = Field(
@@ -121,8 +154,12 @@ class GatmoConfig(GatmoModel):
         "an 8 m laser it cuts the false relocations by a third (docs/experiments.md, "
         "forty-third session)")
     # person hypothesis (constant-velocity Kalman filter on the centre)
-    person_accel_std: float = Field(1.5, gt=0)
-    person_meas_std_m: float = Field(0.1, gt=0)
+    person_accel_std: float = Field(
+        1.5, gt=0, description="acceleration noise [m/s^2] of the person hypothesis's "
+        "constant-velocity Kalman filter (its process noise)")
+    person_meas_std_m: float = Field(
+        0.1, gt=0, description="measurement noise of the person hypothesis's Kalman filter: "
+        "the standard deviation of a cluster's centre as a measurement of the person's")
     # chair hypothesis (evidence grid)
     chair_min_scans: int = Field(
         9, ge=1, description="scans before a track can be a chair (be matched, join Gamma). At "
@@ -130,7 +167,10 @@ class GatmoConfig(GatmoModel):
         "try, a small piece onto part of a larger one seen from one side; at 9 (the paper: 10 "
         "to 70 scans to identify) false relocations per run fall 0.61 -> 0.40 (full stack, "
         "seeds 300-319) and 0.60 -> 0.45 (true poses, held-out seeds 100-109)")
-    chair_min_cells: int = Field(6, ge=1)
+    chair_min_cells: int = Field(
+        6, ge=1, description="chair cells (Metaobject.chair_points: evidence cells hit in 2 "
+        "scans or more) a track needs before it is matched, joins Gamma or becomes a "
+        "provisional landmark")
     still_to_gamma: bool = Field(
         False, description="beyond the paper: a track called a person for its motion alone "
         "(its centre travelled) whose evidence is concentrated (still_min_concentration) joins "
@@ -140,7 +180,6 @@ class GatmoConfig(GatmoModel):
         0.9, gt=0, le=1, description="share of a track's evidence on cells hit in "
         "still_min_hits scans or more that makes it still")
     still_min_hits: int = Field(3, ge=2, description="hits that make a cell's evidence firm")
-    chair_max_speed_mps: float = Field(0.15, gt=0)
     # matching
     match_min_score: float = Field(
         0.75, gt=0, le=1, description="a match's edge score must reach this. 0.75 since "
@@ -169,7 +208,10 @@ class GatmoConfig(GatmoModel):
     match_through_m: float = Field(0.2, gt=0, description="a beam this far beyond: through")
     match_max_through_fraction: float = Field(
         0.1, ge=0, le=1, description="of the beams on the placed object or through it, through")
-    match_min_edge_fraction: float = Field(0.3, ge=0, le=1)
+    match_min_edge_fraction: float = Field(
+        0.3, ge=0, le=1, description="a chair is matched to an object only with at least this "
+        "many chair cells per edge cell of the object: fewer is too little seen to tell "
+        "look-alikes apart (the nudge asks as many)")
     match_ambiguity_wait: bool = Field(
         True, description="beyond the paper: a chair that fits a different-looking shape of "
         "the map (any object, candidate or not) nearly as well as its best match waits for "
@@ -187,15 +229,25 @@ class GatmoConfig(GatmoModel):
         True, description="beyond the paper: of the alignments a partial view allows, the best "
         "that covers no space seen free (else the best, then refused)")
     match_free_rays: int = Field(2, ge=1, description="rays through a cell to call it free")
-    match_max_free_fraction: float = Field(0.05, ge=0, le=1)
-    match_edge_sigma_m: float = Field(0.05, gt=0)
-    match_search_m: float = Field(0.4, gt=0)
-    match_search_deg: float = Field(12.0, gt=0)
+    match_max_free_fraction: float = Field(
+        0.05, ge=0, le=1, description="of the object's inner cells at a matched pose, the "
+        "fraction that may lie where match_free_rays rays crossed this run; more: refused")
+    match_edge_sigma_m: float = Field(
+        0.05, gt=0, description="width (sigma) of the gaussian around each of an object's "
+        "edge points in the field a match is scored on; the coarse search uses 2.5 times it")
+    match_search_m: float = Field(
+        0.4, gt=0, description="the coarse search of a match moves the object's centroid up "
+        "to this plus half the object's size from the chair's centroid, in 0.1 m steps")
     small_object_area_m2: float = Field(
         0.045, ge=0, description="objects with less occupied area are small: matched only "
         "within doubt_search_m, absent only with no returns around them")
-    lookalike_tolerance: float = Field(0.15, gt=0)
-    add_min_cells: int = Field(10, ge=1)
+    lookalike_tolerance: float = Field(
+        0.15, gt=0, description="two objects look alike when their cell counts and principal "
+        "extents differ by at most this fraction: a moved object makes its look-alikes movable, "
+        "and a look-alike is no rival that makes a match wait")
+    add_min_cells: int = Field(
+        10, ge=1, description="a Gamma object seen this run with fewer cells is not added to "
+        "the map at the run's end")
     nudge: bool = Field(
         True, description="beyond the paper: an object whose returns miss its outline while "
         "the rest of the scan fits the map (a piece shifted by less than its size) is matched "

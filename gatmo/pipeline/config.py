@@ -17,11 +17,16 @@ from gatmo.scanmatch.odometry import IcpConfig
 class StackConfig(GatmoModel):
     """amcl: localizer; gatmo: object map; icp: scan matcher; fusion: offset resets."""
 
-    amcl: AmclConfig = Field(default_factory=AmclConfig)
-    gatmo: GatmoConfig = Field(default_factory=GatmoConfig)
-    icp: IcpConfig = Field(default_factory=IcpConfig)
-    fusion: FusionConfig = Field(default_factory=FusionConfig)
-    seed: int = 0
+    amcl: AmclConfig = Field(default_factory=AmclConfig, description="the localizer (AMCL)")
+    gatmo: GatmoConfig = Field(default_factory=GatmoConfig,
+                               description="GATMO: the object map")
+    icp: IcpConfig = Field(default_factory=IcpConfig,
+                           description="the scan matcher (odometry by ICP)")
+    fusion: FusionConfig = Field(default_factory=FusionConfig,
+                                 description="how localizer, scan matcher and GATMO work together "
+                                 "(offset resets, published pose, masks, relocalization)")
+    seed: int = Field(0, description="seed of the localizers' random draws; over several "
+                      "logs, log k (from 0) uses seed + k")
 
 
 def stack_config_class() -> type[StackConfig]:

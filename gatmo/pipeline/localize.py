@@ -48,21 +48,19 @@ def run_localize(
     from gatmo.localization.mcl import MonteCarloLocalizer
     from gatmo.localization.params import load_amcl_yaml
     from gatmo.maps.io import load_map
-    from gatmo.pipeline.runs import check_overlap, ground_truth_of, load_scans, score
+    from gatmo.pipeline.runs import (
+        check_overlap,
+        ground_truth_of,
+        initial_pose_for,
+        load_scans,
+        score,
+    )
 
     grid = load_map(map_yaml)
     cfg = config or (load_amcl_yaml(params_path) if params_path else AmclConfig())
     scans = load_scans(log, fmt, max_scans)
     loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(seed))
-    pose0 = None
-    if initial_pose is not None:
-        pose0 = np.asarray(initial_pose, dtype=float)
-    elif global_localization:
-        pose0 = None
-    elif cfg.initial_pose_xytheta is not None:
-        pose0 = np.asarray(cfg.initial_pose_xytheta, dtype=float)
-    elif scans[0].gt_pose_xytheta is not None:
-        pose0 = scans[0].gt_pose_xytheta
+    pose0 = initial_pose_for(scans, initial_pose, global_localization, cfg.initial_pose_xytheta)
     if pose0 is not None:
         check_overlap(grid, scans[0], pose0, log)
         loc.set_initial_pose(pose0)

@@ -140,12 +140,18 @@ def check_overlap(grid: OccupancyGrid, scan, pose_xytheta: np.ndarray, log: str 
 
 
 # ---------------------------------------------------------------------------- builders
-def initial_pose_for(scans: list, initial_pose, global_localization: bool):
-    """The initial pose: the given one, else the log's first ground-truth pose, else None."""
+def initial_pose_for(scans: list, initial_pose, global_localization: bool, configured=None):
+    """The initial pose (x, y, theta; map frame) a run starts from, None for global
+    localization: the given one (``--initial-pose``), else none with ``global_localization``,
+    else the configuration's (``configured``: ``amcl.initial_pose_xytheta``, a ROS AMCL file's
+    ``initial_pose_x / _y / _a``, as AMCL starts from it), else the log's first ground-truth
+    pose, else None."""
     if initial_pose is not None:
         return np.asarray(initial_pose, dtype=float)
     if global_localization:
         return None
+    if configured is not None:
+        return np.asarray(configured, dtype=float)
     first = scans[0].gt_pose_xytheta
     return None if first is None else np.asarray(first, dtype=float)
 
@@ -441,7 +447,8 @@ def run_gatmo(
     base = load_map(map_yaml)
     mapper = _make_mapper(cfg, base, Path(objects_path) if objects_path else None)
     scans = load_scans(log, fmt, max_scans)
-    pose0 = initial_pose_for(scans, initial_pose, global_localization)
+    pose0 = initial_pose_for(scans, initial_pose, global_localization,
+                             cfg.amcl.initial_pose_xytheta)
     if pose0 is not None:
         check_overlap(base, scans[0], pose0, log)
     trace = run_full(cfg, mapper, scans, cfg.seed, pose0, log=str(log), run_id=run_id,
@@ -572,7 +579,8 @@ def compare(
     for k, log in enumerate(logs):
         scans = load_scans(log, fmt, max_scans)
         gt = ground_truth_of(scans, log, gt_paths[k] if gt_paths else None)
-        pose0 = initial_pose_for(scans, initial_pose, global_localization)
+        pose0 = initial_pose_for(scans, initial_pose, global_localization,
+                             cfg.amcl.initial_pose_xytheta)
         if pose0 is not None:
             check_overlap(base, scans[0], pose0, log)
         seed = cfg.seed + k

@@ -174,51 +174,157 @@ class FusionConfig(GatmoModel):
         "bridge_evidence": False, "bridge_max_closure_m": 0.02, "bridge_max_closure_deg": 1.0,
         "bridge_max_travel_m": 3.0, "anchor_gates_gatmo": False, "anchor_gate_gap_m": 0.15}
 
-    use_scan_matcher: bool = True
-    publish_pose: Literal["localizer", "fused", "aligned"] = "aligned"
-    publish_carry_m: float = Field(0.5, ge=0)
-    publish_carry_deg: float = Field(20.0, ge=0)
-    publish_min_tight_fraction: float = Field(0.8, ge=0, le=1)
-    reset_max_std_xy_m: float = 0.15
-    reset_max_std_theta_deg: float = 5.0
-    absence_max_std_xy_m: float = 0.1
-    absence_max_std_theta_deg: float = 3.0
-    confident_for_m: float = 0.0
-    max_offset_jump_m: float = 0.5
-    offset_gain: float = 1.0
-    max_travel_without_reset_m: float = 1.0
-    settle_after_jump_m: float = 3.0
-    align_to_map: bool = True
-    align_min_fitness: float = 0.6
-    align_max_correction_m: float = 0.15
-    align_max_correction_deg: float = 5.0
-    align_inconclusive: Literal["filter_pose", "skip"] = "filter_pose"
-    align_kernel: Literal["huber", "geman_mcclure"] = "huber"
-    align_kernel_scale_m: float = Field(0.05, gt=0)
-    align_max_iter: int = Field(15, ge=1)
-    align_tight_m: float = Field(0.05, gt=0)
-    mask_unexplained: bool = True
-    mask_withheld: bool = False
-    mask_offset_objects: bool = True
-    relocalize: bool = False
-    relocalize_below_fit: float = Field(0.3, ge=0, le=1)
-    relocalize_min_fit: float = Field(0.5, ge=0, le=1)
-    relocalize_min_gain: float = Field(0.25, ge=0, le=1)
-    relocalize_ambiguity_ratio: float = Field(0.9, gt=0, le=1)
-    relocalize_fit_m: float = Field(0.1, gt=0)
-    relocalize_window_m: float = Field(1.5, gt=0)
-    relocalize_window_deg: float = Field(15.0, gt=0)
-    relocalize_scans: int = Field(3, ge=1)
-    relocalize_min_points: int = Field(30, ge=3)
-    relocalize_min_shift_m: float = Field(0.2, ge=0)
-    relocalize_max_jump_m: float = Field(0.3, ge=0)
-    relocalize_max_jump_per_m: float = Field(1.0, ge=0)
+    use_scan_matcher: bool = Field(
+        True, description="run the ICP scan matcher beside the localizer; its frame is reset "
+        "onto the filter's estimate when the filter is confident. Off: the fused pose is the "
+        "localizer's own")
+    publish_pose: Literal["localizer", "fused", "aligned"] = Field(
+        "aligned", description="the pose the stack reports: aligned, the last pose the "
+        "scan-to-map alignment confirmed with a tight fit, carried by odometry (needs GATMO and "
+        "align_to_map, else the filter's estimate); localizer, the filter's own estimate; fused, "
+        "the matcher's pose re-anchored on the filter")
+    publish_carry_m: float = Field(
+        0.5, ge=0, description="with publish_pose aligned: the last tightly confirmed pose is "
+        "carried by odometry while it has moved at most this far from where it was "
+        "confirmed; beyond, the filter's estimate is published")
+    publish_carry_deg: float = Field(
+        20.0, ge=0, description="with publish_pose aligned: the last tightly confirmed pose is "
+        "carried by odometry while its heading has turned at most this much since it was "
+        "confirmed; beyond, the filter's estimate is published")
+    publish_min_tight_fraction: float = Field(
+        0.8, ge=0, le=1, description="with publish_pose aligned: a pose the alignment confirmed "
+        "is published only if at least this fraction of its points lie within align_tight_m of "
+        "a map edge (a loose fit can be a wrong local one)")
+    reset_max_std_xy_m: float = Field(
+        0.15, description="the localizer is confident (its estimate resets the matcher's frame; "
+        "relocalize checks its pose) when, on a scan it weighed, its position standard "
+        "deviation is at most this and its heading's at most reset_max_std_theta_deg")
+    reset_max_std_theta_deg: float = Field(
+        5.0, description="the confidence test's bound on the localizer's heading standard "
+        "deviation (see reset_max_std_xy_m)")
+    absence_max_std_xy_m: float = Field(
+        0.1, description="GATMO's stricter test: a pose is handed to GATMO as trusted only "
+        "while the localizer's position standard deviation is at most this and its heading's "
+        "at most absence_max_std_theta_deg (or within confident_for_m of a reset)")
+    absence_max_std_theta_deg: float = Field(
+        3.0, description="the bound of GATMO's stricter test on the localizer's heading "
+        "standard deviation (see absence_max_std_xy_m)")
+    confident_for_m: float = Field(
+        0.0, description="travel of the stack's pose since the localizer last passed the reset "
+        "test (reset_max_std_*) within which GATMO is still handed that pose as trusted, though "
+        "the filter fails the stricter absence_max_std_* test")
+    max_offset_jump_m: float = Field(
+        0.5, description="a localizer pose that jumps against odometry by more than this makes "
+        "GATMO wait settle_after_jump_m. A fused pose farther than this from the localizer's "
+        "means the matcher diverged (its frame is reset onto the filter's estimate), and a "
+        "carried aligned pose this far off gives way to the filter's estimate")
+    offset_gain: float = Field(
+        1.0, description="the fraction of the way a confident reset moves the matcher's frame "
+        "onto the filter's estimate: 1 resets it fully (the paper), less averages the filter's "
+        "jitter out. A run's first anchoring is always full")
+    max_travel_without_reset_m: float = Field(
+        1.0, description="travel of the fused pose since the localizer was last confident "
+        "beyond which the matcher's offset counts as stale: the localizer's pose is used and "
+        "the matcher's frame re-anchored on it every scan")
+    settle_after_jump_m: float = Field(
+        3.0, description="odometry travel GATMO waits, handed no trusted pose, after the "
+        "localizer's pose jumped (max_offset_jump_m), its recovery injected random particles, "
+        "or the stack started it again (relocalize, anchor_filter)")
+    align_to_map: bool = Field(
+        True, description="refine the pose handed to GATMO by ICP of the scan against the "
+        "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
+        "alignment contradicts skips the scan. Needed by publish_pose aligned")
+    align_min_fitness: float = Field(
+        0.6, description="the alignment is inconclusive (align_inconclusive) when fewer than "
+        "this fraction of the scan's points are matched to a map edge within the 0.3 m "
+        "correspondence gate")
+    align_max_correction_m: float = Field(
+        0.15, description="a conclusive alignment that moves the pose by more than this "
+        "contradicts the filter: GATMO skips the scan")
+    align_max_correction_deg: float = Field(
+        5.0, description="a conclusive alignment that turns the pose by more than this "
+        "contradicts the filter: GATMO skips the scan")
+    align_inconclusive: Literal["filter_pose", "skip"] = Field(
+        "filter_pose", description="an inconclusive alignment (not converged, degenerate, fewer "
+        "than align_min_fitness of the points matched, too few points, no map): filter_pose "
+        "hands GATMO the unrefined pose as trusted but not verified, skip skips the scan")
+    align_kernel: Literal["huber", "geman_mcclure"] = Field(
+        "huber", description="robust kernel weighting the alignment's residuals: huber, or "
+        "geman_mcclure (redescending, as kiss-icp), which lets furniture moved by less than the "
+        "0.3 m correspondence gate drop out instead of pulling the pose")
+    align_kernel_scale_m: float = Field(
+        0.05, gt=0, description="align_kernel's scale: huber lets a residual beyond it pull "
+        "with a constant force, geman_mcclure one several times it almost not at all")
+    align_max_iter: int = Field(
+        15, ge=1, description="most Gauss-Newton steps of the alignment; one not converged "
+        "within them is inconclusive")
+    align_tight_m: float = Field(
+        0.05, gt=0, description="a point of a confirmed alignment is tight within this of a "
+        "map edge at the pose it converged to (publish_min_tight_fraction)")
+    mask_unexplained: bool = Field(
+        True, description="withhold from the localizer the returns that land, placed from the "
+        "pose odometry predicts, where GATMO found this run's returns unexplained by the "
+        "current map (furniture it has not placed yet, people). Needs GATMO")
+    mask_withheld: bool = Field(
+        False, description="with mask_unexplained: also withhold the returns within delta_W of "
+        "an object left out of the localizer's map (gatmo.withhold_unseen_runs), which that "
+        "map has nothing to explain where the object still stands")
+    mask_offset_objects: bool = Field(
+        True, description="with mask_unexplained: also withhold, scan by scan, the returns of an "
+        "object that all miss it by a consistent offset while the rest of the scan fits the "
+        "map (GatmoMapper.offset_at), while the filter's last estimate passes the "
+        "absence_max_std_* test")
+    relocalize: bool = Field(
+        False, description="start a confident localizer whose pose explains too little of the "
+        "scan again where a correlative search of the current map, refined by ICP, finds a "
+        "pose explaining more. Needs GATMO's map and a localizer with set_initial_pose")
+    relocalize_below_fit: float = Field(
+        0.3, ge=0, le=1, description="search only when the filter's pose explains at most this "
+        "fraction of the scan's points (within relocalize_fit_m of a map edge)")
+    relocalize_min_fit: float = Field(
+        0.5, ge=0, le=1, description="a found pose must explain at least this fraction of the "
+        "scan's points; the filter's pose explaining this much restarts the travel counted for "
+        "relocalize_max_jump_per_m")
+    relocalize_min_gain: float = Field(
+        0.25, ge=0, le=1, description="a found pose must also explain at least this fraction "
+        "of the scan's points more than the filter's pose does")
+    relocalize_ambiguity_ratio: float = Field(
+        0.9, gt=0, le=1, description="the search finds nothing when a second peak more than "
+        "0.3 m from the best scores at least this fraction of it")
+    relocalize_fit_m: float = Field(
+        0.1, gt=0, description="a scan point is explained within this of a map edge; also the "
+        "sigma of the search's likelihood field")
+    relocalize_window_m: float = Field(
+        1.5, gt=0, description="the search's half-width in x and y around the filter's pose; "
+        "a pose found within 0.1 m of the window's edge is refused")
+    relocalize_window_deg: float = Field(
+        15.0, gt=0, description="the search's half-width in heading around the filter's pose; "
+        "a pose found within 1 deg of the window's edge is refused")
+    relocalize_scans: int = Field(
+        3, ge=1, description="the filter is started again only once a pose was found on this "
+        "many checks in a row (its confident updates), agreeing after odometry (0.2 m, 5 deg)")
+    relocalize_min_points: int = Field(
+        30, ge=3, description="fewest scan points (5 cm voxels) for the fit test and the search "
+        "to run")
+    relocalize_min_shift_m: float = Field(
+        0.2, ge=0, description="a found pose closer than this to the filter's is not taken")
+    relocalize_max_jump_m: float = Field(
+        0.3, ge=0, description="a found pose farther from the filter's than this plus "
+        "relocalize_max_jump_per_m times the odometry travel since the filter last explained "
+        "relocalize_min_fit of a scan (or since the run's start) is not taken")
+    relocalize_max_jump_per_m: float = Field(
+        1.0, ge=0, description="metres the farthest restart grows by per metre of odometry "
+        "travel since the filter last fitted the map (see relocalize_max_jump_m)")
     relocalize_min_expected_beams: int = Field(
         10, ge=0, description="search only around a pose from which the current map, ray-cast, "
         "expects at least this many beams to end on something within the laser's range (0: "
         "wherever the pose explains too little of the scan)")
-    relocalize_std_xy_m: float = Field(0.05, gt=0)
-    relocalize_std_deg: float = Field(2.0, gt=0)
+    relocalize_std_xy_m: float = Field(
+        0.05, gt=0, description="position standard deviation of the particles a filter is "
+        "started again with by the stack (relocalize, anchor_filter)")
+    relocalize_std_deg: float = Field(
+        2.0, gt=0, description="heading standard deviation of the particles a filter is "
+        "started again with by the stack (relocalize, anchor_filter)")
     anchor_filter: bool = Field(
         False, description="run a second particle filter beside the localizer, on the same map "
         "and the raw scans, with AMCL's flat sensor model (anchor_laser_model, "

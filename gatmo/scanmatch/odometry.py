@@ -17,21 +17,67 @@ from gatmo.scanmatch.icp import icp_2d, normals_of, voxel_downsample
 
 
 class IcpConfig(GatmoModel):
-    voxel_m: float = Field(0.05, gt=0)
-    max_corr_dist_m: float = Field(0.3, gt=0)
-    max_iter: int = Field(20, ge=1)
-    kernel_scale_m: float = Field(0.05, gt=0)
-    keyframe_dist_m: float = Field(0.3, gt=0)
-    keyframe_angle_rad: float = Field(0.2, gt=0)
-    local_map_keyframes: int = Field(8, ge=1)
-    min_points: int = Field(30, ge=3)
-    min_fitness: float = Field(0.5, ge=0, le=1)
+    voxel_m: float = Field(
+        0.05, gt=0,
+        description="voxel size [m] of the downsampling of each scan's points and of the local "
+        "map: one point per voxel",
+    )
+    max_corr_dist_m: float = Field(
+        0.3, gt=0,
+        description="a scan point pairs with its nearest local-map point only if that is "
+        "within this distance (at ICP's current estimate)",
+    )
+    max_iter: int = Field(
+        20, ge=1,
+        description="most Gauss-Newton iterations of one ICP run (it stops sooner once the "
+        "step falls below 0.1 mm and 1e-5 rad)",
+    )
+    kernel_scale_m: float = Field(
+        0.05, gt=0,
+        description="scale of ICP's Huber kernel: a point-to-line residual longer than this "
+        "is down-weighted, pulling with a constant force",
+    )
+    keyframe_dist_m: float = Field(
+        0.3, gt=0,
+        description="a scan becomes a keyframe of the local map when the matched pose is more "
+        "than this from the last keyframe's (or turned by more than keyframe_angle_rad)",
+    )
+    keyframe_angle_rad: float = Field(
+        0.2, gt=0,
+        description="a scan becomes a keyframe when the matched heading differs from the last "
+        "keyframe's by more than this (see keyframe_dist_m)",
+    )
+    local_map_keyframes: int = Field(
+        8, ge=1,
+        description="number of most recent keyframes whose points make up the local map each "
+        "scan is registered to",
+    )
+    min_points: int = Field(
+        30, ge=3,
+        description="fewest points (after max_range_m and voxel_m) a scan, and the local map, "
+        "need for ICP to run, and a scan to become a keyframe; otherwise the pose follows "
+        "odometry",
+    )
+    min_fitness: float = Field(
+        0.5, ge=0, le=1,
+        description="ICP's result is accepted only if at least this fraction of the scan's "
+        "points found a map point within max_corr_dist_m on a line-like neighbourhood; "
+        "otherwise odometry",
+    )
     max_correction_m: float = Field(0.3, gt=0, description="ICP vs odometry; more -> odometry")
-    max_range_m: float = Field(30.0, gt=0)
+    max_range_m: float = Field(
+        30.0, gt=0,
+        description="scan points farther than this from the robot base (base frame) are left "
+        "out of matching",
+    )
     odom_jump_m: float = Field(
         0.2, gt=0, description="an odometry step this far from constant velocity is a jump: "
         "after a stall, or when ICP from odometry fails, ICP also starts from constant velocity")
-    odom_jump_rad: float = Field(0.2, gt=0)
+    odom_jump_rad: float = Field(
+        0.2, gt=0,
+        description="an odometry step whose heading differs from the constant-velocity step's "
+        "by more than this is a jump too (see odom_jump_m)",
+    )
     velocity_window_s: float = Field(
         0.5, gt=0, description="constant velocity: the mean over at least this much of the "
         "last matched poses")

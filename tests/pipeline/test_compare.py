@@ -237,3 +237,43 @@ def test_the_static_side_can_run_its_own_amcl_parameters(scen, tmp_path):
     assert json.loads((outs["plain"] / "summary.json").read_text())["static_config"] == \
         "config.yaml"
     assert not (outs["plain"] / "static_amcl.yaml").exists()
+
+
+def test_initial_pose_order():
+    """``--initial-pose``, then ``--global``, then the configuration's (a ROS AMCL file's
+    initial_pose_*), then the log's first ground-truth pose."""
+    from types import SimpleNamespace
+
+    from gatmo.pipeline.runs import initial_pose_for
+
+    with_gt = [SimpleNamespace(gt_pose_xytheta=np.array([1.0, 2.0, 0.3]))]
+    no_gt = [SimpleNamespace(gt_pose_xytheta=None)]
+    given, configured = (5.0, 6.0, 0.1), (7.0, 8.0, -0.2)
+    np.testing.assert_array_equal(initial_pose_for(with_gt, given, True, configured), given)
+    assert initial_pose_for(with_gt, None, True, configured) is None
+    np.testing.assert_array_equal(initial_pose_for(with_gt, None, False, configured), configured)
+    np.testing.assert_array_equal(initial_pose_for(with_gt, None, False), [1.0, 2.0, 0.3])
+    assert initial_pose_for(no_gt, None, False) is None
+
+
+def test_run_and_compare_start_from_the_amcl_files_initial_pose(scen, tmp_path):
+    """A ROS AMCL file's initial_pose_x / _y / _a is where ``gatmo run`` and ``gatmo compare``
+    start, as AMCL does (they used to start from the log's ground truth, or globally)."""
+    from gatmo.datasets.carmen import CarmenLog
+
+    truth = next(iter(CarmenLog(scen.logs[0]))).gt_pose_xytheta
+    start = truth + np.array([0.0, 0.5, 0.0])  # 0.5 m off, ten of the cloud's deviations
+    params = tmp_path / "amcl.yaml"
+    params.write_text(f"initial_pose_x: {start[0]}\ninitial_pose_y: {start[1]}\n"
+                      f"initial_pose_a: {start[2]}\ninitial_cov_xx: 0.0025\n"
+                      "initial_cov_yy: 0.0025\n")
+    common = ["--map", str(scen.map_yaml), "--max-scans", "2"]
+    assert main(["run", "--log", str(scen.logs[0]), *common, "--params", str(params),
+                 "--out", str(tmp_path / "r")]) == 0
+    assert main(["compare", str(scen.logs[0]), *common, "--params", str(params),
+                 "--out", str(tmp_path / "c")]) == 0
+    firsts = [np.loadtxt(tmp_path / "r" / "poses.tum")[0, 1:3],
+              *(np.loadtxt(tmp_path / "c" / side / "01_run_1" / "poses.tum")[0, 1:3]
+                for side in ("static", "gatmo"))]
+    for xy in firsts:
+        assert np.hypot(*(xy - start[:2])) < 0.2 < np.hypot(*(xy - truth[:2]))
