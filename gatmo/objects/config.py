@@ -317,12 +317,11 @@ class GatmoConfig(GatmoModel):
     match_gamma_after_standing: bool = Field(
         False, description="beyond the paper: an object found absent is not matched to a Gamma "
         "object last seen before the object was last seen standing where the map has it (a "
-        "scan GATMO took with standing_min_beams returns or more on it): a piece cannot have "
-        "stood at its new place while it still stood at its old one")
+        "scan with standing_min_beams beams or more ending on it, and no more passing through "
+        "it): a piece cannot have stood at its new place while it still stood at its old one")
     standing_min_beams: int = Field(
-        4, ge=1, description="returns within hit_tolerance_m of an object's cells (nearer to it "
-        "than to anything else) in one scan for that scan to see it standing "
-        "(match_gamma_after_standing)")
+        4, ge=1, description="beams ending on an object in one scan (and at least as many as "
+        "pass through it) for that scan to see it standing (match_gamma_after_standing)")
     match_extent_check: bool = Field(
         False, description="beyond the paper: a chair whose returns in one scan reach past "
         "the object's sides (its cells' smallest rectangle) by more than "

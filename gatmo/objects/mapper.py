@@ -462,8 +462,6 @@ class GatmoMapper:
             self._expire(stamp_s, events)
             return events
         self._count_near_returns(pts, lp)
-        if self.cfg.match_gamma_after_standing:
-            self._note_standing(pts)
         self._absence(lp, scan, pts, stamp_s, events, agreement=fit,
                       sees_through=bool(pose_verified) or not self.cfg.absence_from_verified_only)
         if events:  # the map changed: explain against the new one
@@ -747,22 +745,6 @@ class GatmoMapper:
         keep = (own >= 0) | (self._near_dist[c[:, 1], c[:, 0]] > self.cfg.delta_W_m)
         np.add.at(self._near_returns, (c[keep, 1], c[keep, 0]), 1)
 
-    def _note_standing(self, pts: np.ndarray) -> None:
-        """``match_gamma_after_standing``: the objects placed in the map that this scan's
-        returns ``pts`` (N, 2) show standing where the map has them (standing_min_beams
-        returns or more within hit_tolerance_m of the object's cells, nearer to it than to
-        anything else) are stamped with the scan's time."""
-        g = self._grid
-        c = g.world_to_cell(pts)
-        ok = g.in_bounds(c)
-        c = c[ok]
-        own = self._near_owner[c[:, 1], c[:, 0]]
-        on = (own >= 0) & (self._near_dist[c[:, 1], c[:, 0]] <= self.cfg.hit_tolerance_m)
-        idx, n = np.unique(own[on], return_counts=True)
-        objs = self.object_map.objects
-        for i in idx[n >= self.cfg.standing_min_beams]:
-            self._standing_s[objs[int(i)].id] = self._last_stamp
-
     def _explained(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(near any occupied cell, explained) per point (N,). S_free filtering (paper,
         Sec. IV-B): returns within delta_W of the map are explained, except near an object in
@@ -1030,8 +1012,11 @@ class GatmoMapper:
             m = own == i
             oid = objs[int(i)].id
             touched.add(oid)
-            self._through[oid] = self._through.get(oid, 0) + int(np.sum(through[m]))
-            self._hits[oid] = self._hits.get(oid, 0) + int(np.sum(on[m]))
+            n_through, n_on = int(np.sum(through[m])), int(np.sum(on[m]))
+            self._through[oid] = self._through.get(oid, 0) + n_through
+            self._hits[oid] = self._hits.get(oid, 0) + n_on
+            if n_on >= self.cfg.standing_min_beams and n_on >= n_through:
+                self._standing_s[oid] = self._last_stamp  # this scan saw it standing
             ft = self._front_through.setdefault(oid, set())
             ft.update(loc[m & through].tolist())
             ft.difference_update(loc[m & on].tolist())

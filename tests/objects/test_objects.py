@@ -1360,8 +1360,7 @@ def test_an_absence_skips_a_gamma_object_seen_before_the_object_last_stood(
     m._gamma_seen_s[gam.id] = gamma_s  # as _gamma_part records it when a track ends
     s = make_scan(g, (2.0, 3.0, np.pi / 2), max_range_m=4.0, stamp_s=standing_s)
     assert m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=standing_s) == []
-    # the scan saw it standing (counted only with the option on)
-    assert m._standing_s.get(cab.id) == (standing_s if after_standing else None)
+    assert m._standing_s[cab.id] == standing_s  # the scan saw it standing
     events: list = []
     m._mark_absent(cab, 3.0, events)
     kinds = [e.kind for e in events if e.object_id == cab.id]
