@@ -314,14 +314,6 @@ class GatmoConfig(GatmoModel):
         True, description="the paper's order-free matching, one way: an object found absent "
         "is matched to the Gamma objects seen this run (chairs whose tracks ended unmatched). "
         "Off (tuning seeds 300-319): false relocations unchanged, found 18.1 % -> 17.3 %")
-    match_gamma_after_standing: bool = Field(
-        False, description="beyond the paper: an object found absent is not matched to a Gamma "
-        "object last seen before the object was last seen standing where the map has it (a "
-        "scan with standing_min_beams beams or more ending on it, and no more passing through "
-        "it): a piece cannot have stood at its new place while it still stood at its old one")
-    standing_min_beams: int = Field(
-        4, ge=1, description="beams ending on an object in one scan (and at least as many as "
-        "pass through it) for that scan to see it standing (match_gamma_after_standing)")
     match_extent_check: bool = Field(
         False, description="beyond the paper: a chair whose returns in one scan reach past "
         "the object's sides (its cells' smallest rectangle) by more than "

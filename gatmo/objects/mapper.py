@@ -180,11 +180,6 @@ class GatmoMapper:
         self._front_through: dict[int, set] = {}
         self._doubt: set[int] = set()
         self._gamma_this_run: set[int] = set()  # Gamma objects seen this run
-        # when each Gamma object seen this run was last seen (its latest track ended) and
-        # each object was last seen standing where the map has it, stamps [s]
-        # (match_gamma_after_standing)
-        self._gamma_seen_s: dict[int, float] = {}
-        self._standing_s: dict[int, float] = {}
         # their returns per scan this run (their tracks' Metaobject.scan_points), for the
         # extent test
         self._gamma_points: dict[int, list] = {}
@@ -1012,11 +1007,8 @@ class GatmoMapper:
             m = own == i
             oid = objs[int(i)].id
             touched.add(oid)
-            n_through, n_on = int(np.sum(through[m])), int(np.sum(on[m]))
-            self._through[oid] = self._through.get(oid, 0) + n_through
-            self._hits[oid] = self._hits.get(oid, 0) + n_on
-            if n_on >= self.cfg.standing_min_beams and n_on >= n_through:
-                self._standing_s[oid] = self._last_stamp  # this scan saw it standing
+            self._through[oid] = self._through.get(oid, 0) + int(np.sum(through[m]))
+            self._hits[oid] = self._hits.get(oid, 0) + int(np.sum(on[m]))
             ft = self._front_through.setdefault(oid, set())
             ft.update(loc[m & through].tolist())
             ft.difference_update(loc[m & on].tolist())
@@ -1087,7 +1079,7 @@ class GatmoMapper:
                 if fit is not None:
                     fits.append((fit[0], len(fits), m, None, None))
         for g in self.object_map.Gamma if self.cfg.match_absence_to_gamma else []:
-            if g.id in self._gamma_this_run and not self._gone_after(g, o):
+            if g.id in self._gamma_this_run:  # seen in an earlier run only: no evidence
                 fit = self._fit_gamma_ranked(g, o)
                 if fit is not None:
                     fits.append((fit[0], len(fits), None, g, fit[1]))
@@ -1099,16 +1091,6 @@ class GatmoMapper:
             elif g in self.object_map.objects:
                 self.object_map.objects.remove(g)
                 self._relocate(o, mt, stamp_s, events)
-
-    def _gone_after(self, g: MapObject, o: MapObject) -> bool:
-        """``match_gamma_after_standing``: the Gamma object ``g`` was last seen before ``o``
-        was last seen standing where the map has it, so ``g`` is something else: a piece
-        cannot have stood at its new place while it still stood at its old one (on the long
-        real logs, absences matched to chairs seen minutes earlier and tens of metres away
-        moved things that never left; docs/experiments.md, forty-sixth session)."""
-        if not self.cfg.match_gamma_after_standing:
-            return False
-        return self._gamma_seen_s.get(g.id, -np.inf) < self._standing_s.get(o.id, -np.inf)
 
     # ---------------------------------------------------------- metaobjects
     def _track(self, pts, stamp_s, events, verified: bool = True) -> None:
@@ -1604,7 +1586,6 @@ class GatmoMapper:
             same.shape_xy, same.edge_xy, same.pose_xytheta = shape, edge, pose
             same.seen_count += 1
             self._gamma_this_run.add(same.id)
-            self._gamma_seen_s[same.id] = float(stamp_s)
             self._gamma_points.setdefault(same.id, []).extend(scan_points or [])
             self._gamma_near[same.id] = min(self._gamma_near.get(same.id, float("inf")),
                                             nearest_view_m)
@@ -1619,7 +1600,6 @@ class GatmoMapper:
         o.record(self.run, stamp_s)
         self.object_map.objects.append(o)
         self._gamma_this_run.add(o.id)
-        self._gamma_seen_s[o.id] = float(stamp_s)
         self._gamma_points[o.id] = list(scan_points or [])
         self._gamma_near[o.id] = nearest_view_m
         events.append(Event(float(stamp_s), self.run, "gamma", o.id, None, None,

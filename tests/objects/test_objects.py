@@ -1340,49 +1340,6 @@ def test_an_absence_takes_a_gamma_corner_seen_this_run(to_gamma, relocated):
         assert np.min(np.hypot(*(corner - (5.0, 1.0)).T)) < 0.08
 
 
-@pytest.mark.parametrize(("after_standing", "gamma_first", "relocated"),
-                         [(True, True, False), (True, False, True), (False, True, True)])
-def test_an_absence_skips_a_gamma_object_seen_before_the_object_last_stood(
-        after_standing, gamma_first, relocated):
-    """The cabinet and the Gamma corner of the test above, with a scan that sees the cabinet
-    standing where the map has it. With ``match_gamma_after_standing`` a Gamma object last
-    seen before that scan cannot be where the cabinet went (it stood at its old place after
-    the corner was seen elsewhere): the absence is not matched to it. Seen after the scan,
-    the corner is taken as before; without the option, always."""
-    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.4, 4.65), (9.0, 4.0, 9.7, 4.7)])
-    om = ObjectMap.from_grid(g, CFG)
-    cab = min((o for o in om.objects if not o.structure), key=lambda o: o.pose_xytheta[0])
-    m = GatmoMapper(om, g, CFG.model_copy(
-        update={"match_gamma_after_standing": after_standing}))
-    m.begin_run(1)
-    gamma_s, standing_s = (1.0, 2.0) if gamma_first else (2.0, 1.0)
-    gam = _corner_gamma(m, (5.0, 1.0), 0.45)
-    m._gamma_seen_s[gam.id] = gamma_s  # as _gamma_part records it when a track ends
-    s = make_scan(g, (2.0, 3.0, np.pi / 2), max_range_m=4.0, stamp_s=standing_s)
-    assert m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=standing_s) == []
-    assert m._standing_s[cab.id] == standing_s  # the scan saw it standing
-    events: list = []
-    m._mark_absent(cab, 3.0, events)
-    kinds = [e.kind for e in events if e.object_id == cab.id]
-    assert kinds[0] == "absent" and ("relocated" in kinds) == relocated, kinds
-    assert (gam in m.object_map.objects) == (not relocated)
-
-
-def test_a_gamma_object_records_when_it_was_last_seen():
-    """``_gamma_part`` stamps a new Gamma object, and again when a later track joins it."""
-    m = GatmoMapper.from_config(CFG, room_grid(12, 6, 0.05))
-    m.begin_run(1)
-    t = np.arange(0.0, 0.45, 0.05)
-    pts = np.vstack([np.c_[5.0 + t, np.full_like(t, 1.0)], np.c_[np.full_like(t, 5.0), 1.0 + t]])
-    m._gamma_part(pts, 4.0, [])
-    (gam,) = m.object_map.Gamma
-    assert m._gamma_seen_s[gam.id] == 4.0
-    m._gamma_part(pts + [0.02, 0.0], 7.5, [])
-    assert m.object_map.Gamma == [gam] and m._gamma_seen_s[gam.id] == 7.5
-    m.begin_run(2)
-    assert m._gamma_seen_s == {} and m._standing_s == {}
-
-
 def test_a_match_made_despite_ambiguity_is_settled_as_the_run_ends():
     # the settled case above: the near half of a desk fits the absent box (edge score 0.93)
     # and the unseen desk nearly as well, so the match waits and is settled as the run ends
