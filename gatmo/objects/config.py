@@ -33,7 +33,10 @@ class GatmoConfig(GatmoModel):
         "match_absence_reclaims": False, "match_gamma_beam_check": False,
         # read by nothing since the chair / person verdict stopped using the Kalman filter's
         # speed and the coarse search turned by a fixed +-6 deg (forty-sixth session)
-        "chair_max_speed_mps": 0.15, "match_search_deg": 12.0}
+        "chair_max_speed_mps": 0.15, "match_search_deg": 12.0,
+        # an absence not matched to a Gamma object seen before the object last stood where
+        # the map has it: ACES lost (forty-sixth session)
+        "match_gamma_after_standing": False, "standing_min_beams": 4}
 
     delta_R_m: float = Field(
         0.05, gt=0, description="the paper's delta_R: the person hypothesis integrates its "
