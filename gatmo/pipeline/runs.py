@@ -580,7 +580,7 @@ def compare(
         scans = load_scans(log, fmt, max_scans)
         gt = ground_truth_of(scans, log, gt_paths[k] if gt_paths else None)
         pose0 = initial_pose_for(scans, initial_pose, global_localization,
-                             cfg.amcl.initial_pose_xytheta)
+                                 cfg.amcl.initial_pose_xytheta)
         if pose0 is not None:
             check_overlap(base, scans[0], pose0, log)
         seed = cfg.seed + k
