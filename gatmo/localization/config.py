@@ -296,9 +296,9 @@ class AmclConfig(GatmoModel):
     initial_pose_xytheta: tuple[float, float, float] | None = Field(
         None,
         description="initial pose (x [m], y [m], heading [rad], map frame) the particles start "
-        "around, a Gaussian with the initial_cov_* variances; None: none. `gatmo localize` "
-        "uses it unless given --initial-pose or --global (ROS 1: initial_pose_x / _y / _a; "
-        "Nav2: initial_pose x / y / yaw with set_initial_pose)",
+        "around, a Gaussian with the initial_cov_* variances; None: none. `gatmo localize`, "
+        "`run` and `compare` start there unless given --initial-pose or --global (ROS 1: "
+        "initial_pose_x / _y / _a; Nav2: initial_pose x / y / yaw with set_initial_pose)",
     )
     initial_cov_xx_m2: float = Field(
         0.25, ge=0,
