@@ -148,6 +148,12 @@ class GatmoConfig(GatmoModel):
                                      description="farther returns are too sparse to track")
     track_range_margin_m: float = Field(
         0.7, ge=0, description="returns within this of the laser's max range are not tracked")
+    match_max_move_m: float | None = Field(
+        None, gt=0, description="beyond the paper: a match may move an object at most this far "
+        "[m] from where it was (a site's prior: furniture is rearranged within a room); farther, "
+        "the chair is refused and, if it stays, joins the map as a new object at the run's end, "
+        "while the absent object keeps its identity and its old pose's history. None: no limit "
+        "(the paper)")
     match_far_near_view_m: float = Field(
         3.3, gt=0, description="a match putting an object more than doubt_search_m from where "
         "it was needs a chair seen within this range [m] (the median range of its returns) "

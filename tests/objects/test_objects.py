@@ -75,6 +75,21 @@ def test_shifted_small_object_is_in_doubt_not_absent_and_relocated_with_its_id()
     assert np.hypot(*(box.pose_xytheta[:2] - [5.075, 3.0])) < 0.06
 
 
+def test_a_track_is_not_matched_beyond_match_max_move_m():
+    # the shifted box above, with match_max_move_m under its 0.3 m shift: the chair there is
+    # refused as the box (counted as max_move), and the box is not relocated
+    m, box, world = _shifted_box()
+    m.cfg = m.cfg.model_copy(update={"match_max_move_m": 0.2})
+    old = box.pose_xytheta.copy()
+    events = []
+    for i, x in enumerate(np.linspace(2.0, 3.0, 30)):
+        s = make_scan(world, (x, 2.75, 0.0), n_beams=181, max_range_m=8.0, stamp_s=0.1 * i)
+        events += m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=0.1 * i)
+    assert "relocated" not in [e.kind for e in events]
+    assert m.refusals.get((box.id, "max_move"), 0) > 0
+    np.testing.assert_array_equal(box.pose_xytheta, old)
+
+
 def _one_object(size_m, map_box, world_boxes, **cfg_update):
     """(mapper in run 1, its one object, the world) for a room of ``size_m`` (w, h) whose map
     has ``map_box`` and whose world has ``world_boxes`` instead."""
@@ -1338,6 +1353,31 @@ def test_an_absence_takes_a_gamma_corner_seen_this_run(to_gamma, relocated):
     if relocated:  # the cabinet's corner on the seen corner
         corner = transform_points(cab.pose_xytheta, cab.shape_xy)
         assert np.min(np.hypot(*(corner - (5.0, 1.0)).T)) < 0.08
+
+
+@pytest.mark.parametrize(("max_move_m", "relocated"), [(None, True), (10.0, True), (3.0, False)])
+def test_match_max_move_m_bounds_how_far_a_match_moves_an_object(max_move_m, relocated):
+    """The cabinet and the Gamma corner of the test above, 4.3 m apart: with
+    ``match_max_move_m`` under that the corner is refused (counted as ``gamma_max_move``) and
+    the cabinet stays absent with its pose; the corner stays in Gamma."""
+    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.4, 4.65), (9.0, 4.0, 9.7, 4.7)])
+    om = ObjectMap.from_grid(g, CFG)
+    cab = min((o for o in om.objects if not o.structure), key=lambda o: o.pose_xytheta[0])
+    old = cab.pose_xytheta.copy()
+    m = GatmoMapper(om, g, CFG.model_copy(update={"match_max_move_m": max_move_m}))
+    m.begin_run(1)
+    gam = _corner_gamma(m, (5.0, 1.0), 0.45)
+    events: list = []
+    m._mark_absent(cab, 1.0, events)
+    kinds = [e.kind for e in events if e.object_id == cab.id]
+    assert ("relocated" in kinds) == relocated, kinds
+    assert (gam in m.object_map.objects) == (not relocated)
+    assert (m.refusals.get((cab.id, "gamma_max_move"), 0) > 0) == (not relocated)
+    if relocated:
+        assert 3.0 < np.hypot(*(cab.pose_xytheta[:2] - old[:2])) < 10.0
+    else:
+        assert cab.status == "A"
+        np.testing.assert_array_equal(cab.pose_xytheta, old)
 
 
 def test_a_match_made_despite_ambiguity_is_settled_as_the_run_ends():
