@@ -64,8 +64,12 @@ class Event:
 def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
     """How a match ``mt`` of ``o`` ranks among others: tier first, then at an earlier pose (its
     prior), the score to 0.05, then nearness to where ``o`` is (look-alikes: the nearest)."""
-    return (tier, earlier, round(mt.score * 20) / 20,
-            -float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))))
+    return (tier, earlier, round(mt.score * 20) / 20, -_move_m(o, mt))
+
+
+def _move_m(o: MapObject, mt) -> float:
+    """How far the match ``mt`` moves ``o``'s frame [m]."""
+    return float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])))
 
 
 def _diameter(points_xy: np.ndarray) -> float:
@@ -716,7 +720,7 @@ class GatmoMapper:
         now = self._field(o).score(transform_points(inverse(o.pose_xytheta), pts))
         if (mt.score < c.match_min_score or mt.score < now + c.nudge_min_gain
                 or _footprint_shift_m(o, o.pose_xytheta, mt.pose_xytheta) <= c.nudge_min_shift_m
-                or np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > c.nudge_max_shift_m
+                or _move_m(o, mt) > c.nudge_max_shift_m
                 or not self._free_consistent(o, mt)):
             return None
         sup, con = beam_consistency(o, mt.pose_xytheta, views, c.hit_tolerance_m,
@@ -1480,8 +1484,7 @@ class GatmoMapper:
 
     def _far(self, o: MapObject, mt) -> bool:
         """The match ``mt`` puts ``o`` more than ``doubt_search_m`` from where it is."""
-        return bool(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2]))
-                    > self.cfg.doubt_search_m)
+        return _move_m(o, mt) > self.cfg.doubt_search_m
 
     def _beyond_max_move(self, o: MapObject, mt) -> bool:
         """``match_max_move_m``: the match ``mt`` moves ``o`` farther than that. On the long
@@ -1490,8 +1493,7 @@ class GatmoMapper:
         the simulated halls' finds move pieces at most 17.7 m (docs/experiments.md,
         forty-sixth session)."""
         cap = self.cfg.match_max_move_m
-        return bool(cap is not None
-                    and np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])) > cap)
+        return cap is not None and _move_m(o, mt) > cap
 
     def _distinctive(self, o: MapObject) -> bool:
         """Beyond the paper (its small objects were confused): an object with less than
