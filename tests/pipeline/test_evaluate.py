@@ -185,3 +185,53 @@ def test_object_state_tells_where_an_object_stands_against_its_piece():
     gone.status = "A"
     assert object_state(gone, 7, layout0, layout) == "absent"
     assert object_state(_box_object([2.0, 4.0, 0.0]), 9, layout0, layout) == "unknown"
+
+
+def _piece_views_every_ray(scans, piece_old, piece_new, res=0.05):
+    """piece_views as first written: every ray of every scan sampled (the reference the
+    bounding-circle cull must agree with)."""
+    from scipy.spatial import cKDTree
+
+    from gatmo.geometry import compose, transform_points
+    from gatmo.pipeline.evaluate import _piece_points
+
+    told = cKDTree(transform_points(np.array(piece_old["pose"]), _piece_points(piece_old, res)))
+    tnew = cKDTree(transform_points(np.array(piece_new["pose"]), _piece_points(piece_new, res)))
+    old, new = np.zeros(len(scans), bool), np.zeros(len(scans), bool)
+    for i, s in enumerate(scans):
+        lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
+        a = lp[2] + s.angles_rad
+        u = np.stack([np.cos(a), np.sin(a)], 1)
+        valid = s.ranges_m < s.range_max_m
+        d, _ = tnew.query(lp[:2] + s.ranges_m[valid, None] * u[valid], distance_upper_bound=0.06)
+        new[i] = np.isfinite(d).sum() >= 8
+        rr = np.where(valid, s.ranges_m, s.range_max_m) - 0.1
+        ts = np.arange(0.05, s.range_max_m, 0.05)
+        pts = lp[:2][None, None] + ts[None, :, None] * u[:, None, :]
+        m = ts[None, :] < rr[:, None]
+        d, _ = told.query(pts[m], distance_upper_bound=0.03)
+        inside = np.zeros(m.shape, bool)
+        inside[m] = np.isfinite(d)
+        old[i] = inside.any(axis=1).sum() >= 5
+    return old, new
+
+
+def test_piece_views_agrees_with_sampling_every_ray():
+    from gatmo.pipeline.evaluate import piece_views
+
+    rng = np.random.default_rng(7)
+    world = room_grid(10.0, 8.0, boxes=[(6.0, 2.0, 6.6, 2.5)])
+    new_piece = {"id": 1, "label": "desk", "pose": [6.3, 2.25, 0.0],
+                 "shape": {"kind": "box", "dims_m": [0.6, 0.5]}}
+    scans = []
+    for _ in range(60):
+        pose = (rng.uniform(0.5, 9.5), rng.uniform(0.5, 7.5), rng.uniform(-np.pi, np.pi))
+        scans.append(make_scan(world, pose, n_beams=181, max_range_m=4.0))
+    for pose in ([3.0, 4.0, 0.3], [5.0, 2.0, 1.2], [8.0, 6.0, -0.7]):
+        old_piece = {"id": 1, "label": "desk", "pose": pose,
+                     "shape": {"kind": "box", "dims_m": [0.6, 0.5]}}
+        got = piece_views(scans, old_piece, new_piece)
+        want = _piece_views_every_ray(scans, old_piece, new_piece)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        assert 0 < want[0].sum() < len(scans)  # the case tells something
