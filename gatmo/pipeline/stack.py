@@ -669,6 +669,23 @@ class LocalizationStack:
         s_xy, s_th = self.fusion.relocalize_std_xy_m, np.radians(self.fusion.relocalize_std_deg)
         return np.diag([s_xy**2, s_xy**2, s_th**2])
 
+    def _anchor_start(self, scan: Scan) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Where the two filters stand before their first update of a run or after a restart
+        (the pose they were started at), with the odometry of ``scan``: the poses they last
+        agreed on, from which :meth:`_parted_from_anchor` measures who strayed. None if either
+        was not started at a pose (global localization), or cannot tell."""
+        try:
+            (p_loc, c_loc), (p_anchor, c_anchor) = (self.localizer.estimate(),
+                                                     self.anchor.estimate())
+        except AttributeError:  # a localizer without estimate(): nothing to tell
+            return None
+        # a cloud spread over the map has no pose to stray from
+        if max(c_loc[0, 0] + c_loc[1, 1], c_anchor[0, 0] + c_anchor[1, 1]) > 1.0:
+            return None
+        return (_wrapped(np.asarray(p_loc, dtype=float)),
+                _wrapped(np.asarray(p_anchor, dtype=float)),
+                np.asarray(scan.odom_pose_xytheta, dtype=float).copy())
+
     def _parted_from_anchor(self, est, loc_pose: np.ndarray, anchor_est,
                             odom: np.ndarray, scan: Scan) -> np.ndarray | None:
         """The anchor filter's pose (3,) if the localizer has parted from it (more than
@@ -750,6 +767,8 @@ class LocalizationStack:
         t0 = time.perf_counter()
         match = self.matcher.register(scan) if self.matcher is not None else None
         masked, withheld = self._masked(scan)
+        if self.anchor is not None and self._anchor_ref is None:
+            self._anchor_ref = self._anchor_start(scan)
         anchor_est = (self.anchor.update(scan.odom_pose_xytheta, scan)
                       if self.anchor is not None else None)
         if self._takes_withheld:

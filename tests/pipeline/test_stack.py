@@ -1046,6 +1046,52 @@ def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose
     assert all(o.gatmo_pose_xytheta is None for o in out[restart_at:restart_at + 20])
 
 
+class _Started:
+    """A stand-in's ``estimate()`` before its first update: the pose it was started at
+    (``truth[0]``, a 0.1 m cloud), as ``MonteCarloLocalizer`` gives after set_initial_pose."""
+
+    def estimate(self):
+        return self.truth[0].copy(), np.diag([0.1**2, 0.1**2, 0.05**2])
+
+
+class _StartedStuck(_Started, StuckLocalizer):
+    pass
+
+
+class _StartedAnchor(_Started, AnchorStandIn):
+    pass
+
+
+@pytest.mark.parametrize("knows_start", [True, False])
+def test_a_filter_that_slides_on_its_first_update_is_started_again_at_the_anchors_pose(
+        knows_start):
+    """Both filters start at the run's initial pose; the localizer's first update slides it
+    1.08 m off while the anchor stays. They last agreed where they were started, so the
+    localizer is the one that moved against the wheels: it is started again at the anchor's
+    pose on its 5th update apart. (Measured from where the two stood after their first
+    update, as before, neither had moved since "they last agreed", and nothing was done.) A
+    stand-in without ``estimate()`` keeps that old behaviour."""
+    grid, truth, scans = _reloc_world(40)
+    loc = (_StartedStuck if knows_start else StuckLocalizer)(truth, (0.9, -0.6, 0.0), slip_at=0)
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    anchor = (_StartedAnchor if knows_start else AnchorStandIn)(truth)
+    stack = LocalizationStack(loc, None, _MapOnly(grid),
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
+                                           relocalize=False),
+                              anchor=anchor)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    restarted = [i for i, o in enumerate(out) if o.relocalized]
+    if not knows_start:
+        assert restarted == [] and loc.restarts == 0
+        return
+    assert restarted == [4] and loc.restarts == 1 and anchor.restarts == []
+    np.testing.assert_allclose(out[4].localizer_pose_xytheta, truth[4], atol=1e-9)
+    err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out[5:]])[:, :2]
+                     - truth[5:, :2]).T)
+    assert err.max() < 1e-6
+
+
 def test_no_filter_is_started_again_in_a_wall():
     """A filter is not started again at a pose its map has occupied (``set_initial_pose``
     refuses one, and a lost filter's pose can be in a wall): the anchor that strayed for good
