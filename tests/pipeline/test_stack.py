@@ -1092,6 +1092,78 @@ def test_a_filter_that_slides_on_its_first_update_is_started_again_at_the_anchor
     assert err.max() < 1e-6
 
 
+class _EstimatingAnchor(_StartedAnchor):
+    """The anchor stand-in with ``estimate()``: where it was started, then its last pose."""
+
+    def update(self, odom, scan, withheld=None):
+        self.last = super().update(odom, scan, withheld)
+        return self.last
+
+    def estimate(self):
+        if not hasattr(self, "last"):
+            return super().estimate()
+        return self.last.pose_xytheta.copy(), self.last.cov.copy()
+
+
+@pytest.mark.parametrize("offset, anchor_off, on, anchor_from", [
+    ((0.25, 0.0, 0.0), (), True, 10),  # the localizer slid 0.25 m: the anchor is reported
+    ((0.25, 0.0, 0.0), (), False, None),  # (off: the localizer's pose, as before)
+    ((0.15, 0.0, 0.0), (), True, None),  # 0.15 m: within anchor_agree_m
+    ((0.0, 0.0, 0.0), range(10, 40), True, None),  # the anchor strayed: the localizer stays
+])
+def test_the_anchor_is_reported_while_the_localizer_strays_from_it(
+        offset, anchor_off, on, anchor_from):
+    """``publish_anchor_when_apart``: from scan 10 the localizer is ``offset`` off, within
+    ``anchor_gap_m`` (no restart); while the two are more than ``anchor_agree_m`` apart and the
+    localizer is the one that moved against the wheels since they last agreed, the stack
+    reports the anchor's pose. The localizer is left as it is."""
+    grid, truth, scans = _reloc_world(40)
+    loc = _StartedStuck(truth, offset, slip_at=10)
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    anchor = _EstimatingAnchor(truth, anchor_off, bias=(0.25, 0.1, 0.0))
+    stack = LocalizationStack(loc, None, _MapOnly(grid),
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
+                                           relocalize=False, publish_pose="localizer",
+                                           publish_anchor_when_apart=on),
+                              anchor=anchor)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    assert loc.restarts == 0 and anchor.restarts == []
+    pub = np.array([o.pose_xytheta for o in out])
+    locp = np.array([o.localizer_pose_xytheta for o in out])
+    np.testing.assert_allclose(locp, truth + np.where(np.arange(40)[:, None] >= 10, offset, 0.0),
+                               atol=1e-9)
+    if anchor_from is None:
+        np.testing.assert_allclose(pub, locp, atol=1e-9)
+    else:
+        np.testing.assert_allclose(pub[:anchor_from], locp[:anchor_from], atol=1e-9)
+        np.testing.assert_allclose(pub[anchor_from:], truth[anchor_from:], atol=1e-9)
+
+
+def test_the_anchor_is_not_reported_where_its_pose_explains_the_scan_worse():
+    """The wheels slip 0.25 m at scan 10 and the anchor follows them; the localizer stays on
+    the true pose, so it is the one that moved against the wheels. The anchor's pose explains
+    the scan far less (``anchor_fit_margin``): the localizer's pose is reported, as on MIT
+    CSAIL, where every such parting was the localizer correcting itself."""
+    grid, truth, _ = _reloc_world(40)
+    slip = np.array([0.25, 0.0, 0.0])
+    odom = truth + np.where(np.arange(40)[:, None] >= 10, slip, 0.0)
+    scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0,
+                       odom_pose_xytheta=odom[i], stamp_s=0.1 * i) for i in range(40)]
+    loc = _StartedStuck(truth, (0.0, 0.0, 0.0))
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    anchor = _EstimatingAnchor(truth, range(10, 40), bias=slip)
+    stack = LocalizationStack(loc, None, _MapOnly(grid),
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
+                                           relocalize=False, publish_pose="localizer",
+                                           publish_anchor_when_apart=True),
+                              anchor=anchor)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    np.testing.assert_allclose([o.pose_xytheta for o in out], truth, atol=1e-9)
+    assert loc.restarts == 0
+
+
 def test_no_filter_is_started_again_in_a_wall():
     """A filter is not started again at a pose its map has occupied (``set_initial_pose``
     refuses one, and a lost filter's pose can be in a wall): the anchor that strayed for good
