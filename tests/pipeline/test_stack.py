@@ -1195,6 +1195,7 @@ def test_the_anchor_filter_runs_the_localizers_parameters_with_a_flat_sensor_mod
 
     cfg = sim_stack_config()
     assert cfg.fusion.anchor_filter  # on in the simulated halls' configuration
+    assert cfg.fusion.publish_anchor_when_apart  # and the anchor reported while they part
     grid, truth, _ = _reloc_world(5)
     cfg.fusion.anchor_filter = False
     assert make_full_stack(cfg, _make_mapper(cfg, grid, None), 3, truth[0]).anchor is None
