@@ -335,15 +335,21 @@ def piece_views(scans, piece_old: dict, piece_new: dict | None,
         near = np.hypot(*(lp[:2] + along[:, None] * u - centre).T) <= reach
         if near.sum() < 5:
             continue
-        u, rr = u[near], rr[near]
-        ts = np.arange(0.05, s.range_max_m, 0.05)
-        pts = lp[:2][None, None] + ts[None, :, None] * u[:, None, :]
-        m = ts[None, :] < rr[:, None]
-        d, _ = told.query(pts[m], distance_upper_bound=0.03)
-        inside = np.zeros(m.shape, bool)
-        inside[m] = np.isfinite(d)
-        old[i] = inside.any(axis=1).sum() >= 5
+        old[i] = _rays_crossing(told, lp[:2], u[near], rr[near], s.range_max_m) >= 5
     return old, new
+
+
+def _rays_crossing(tree: cKDTree, origin_xy: np.ndarray, u: np.ndarray, free_m: np.ndarray,
+                   range_max_m: float) -> int:
+    """How many rays from ``origin_xy`` along the unit directions ``u`` (R, 2), each free up
+    to ``free_m`` (R,) [m], pass within 3 cm of a point of ``tree`` (sampled every 5 cm)."""
+    ts = np.arange(0.05, range_max_m, 0.05)
+    pts = origin_xy[None, None] + ts[None, :, None] * u[:, None, :]
+    m = ts[None, :] < free_m[:, None]
+    d, _ = tree.query(pts[m], distance_upper_bound=0.03)
+    inside = np.zeros(m.shape, bool)
+    inside[m] = np.isfinite(d)
+    return int(inside.any(axis=1).sum())
 
 
 def observed(scans, piece_old: dict, piece_new: dict | None, min_scans: int = 5,

@@ -193,7 +193,7 @@ def _piece_views_every_ray(scans, piece_old, piece_new, res=0.05):
     from scipy.spatial import cKDTree
 
     from gatmo.geometry import compose, transform_points
-    from gatmo.pipeline.evaluate import _piece_points
+    from gatmo.pipeline.evaluate import _piece_points, _rays_crossing
 
     told = cKDTree(transform_points(np.array(piece_old["pose"]), _piece_points(piece_old, res)))
     tnew = cKDTree(transform_points(np.array(piece_new["pose"]), _piece_points(piece_new, res)))
@@ -206,13 +206,7 @@ def _piece_views_every_ray(scans, piece_old, piece_new, res=0.05):
         d, _ = tnew.query(lp[:2] + s.ranges_m[valid, None] * u[valid], distance_upper_bound=0.06)
         new[i] = np.isfinite(d).sum() >= 8
         rr = np.where(valid, s.ranges_m, s.range_max_m) - 0.1
-        ts = np.arange(0.05, s.range_max_m, 0.05)
-        pts = lp[:2][None, None] + ts[None, :, None] * u[:, None, :]
-        m = ts[None, :] < rr[:, None]
-        d, _ = told.query(pts[m], distance_upper_bound=0.03)
-        inside = np.zeros(m.shape, bool)
-        inside[m] = np.isfinite(d)
-        old[i] = inside.any(axis=1).sum() >= 5
+        old[i] = _rays_crossing(told, lp[:2], u, rr, s.range_max_m) >= 5
     return old, new
 
 

@@ -1105,6 +1105,19 @@ class _EstimatingAnchor(_StartedAnchor):
         return self.last.pose_xytheta.copy(), self.last.cov.copy()
 
 
+def _run_reporting(loc, anchor, grid, scans, on=True):
+    """The stack with the anchor filter and ``publish_anchor_when_apart`` ``on`` (no scan
+    matcher, no relocalizer, the localizer's own pose reported otherwise) over ``scans``."""
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    stack = LocalizationStack(loc, None, _MapOnly(grid),
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
+                                           relocalize=False, publish_pose="localizer",
+                                           publish_anchor_when_apart=on),
+                              anchor=anchor)
+    stack.begin_run(1)
+    return [stack.step(s) for s in scans]
+
+
 @pytest.mark.parametrize("offset, anchor_off, on, anchor_from", [
     ((0.25, 0.0, 0.0), (), True, 10),  # the localizer slid 0.25 m: the anchor is reported
     ((0.25, 0.0, 0.0), (), False, None),  # (off: the localizer's pose, as before)
@@ -1119,15 +1132,8 @@ def test_the_anchor_is_reported_while_the_localizer_strays_from_it(
     reports the anchor's pose. The localizer is left as it is."""
     grid, truth, scans = _reloc_world(40)
     loc = _StartedStuck(truth, offset, slip_at=10)
-    loc.update_map_region = lambda cells, ix0, iy0: None
     anchor = _EstimatingAnchor(truth, anchor_off, bias=(0.25, 0.1, 0.0))
-    stack = LocalizationStack(loc, None, _MapOnly(grid),
-                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
-                                           relocalize=False, publish_pose="localizer",
-                                           publish_anchor_when_apart=on),
-                              anchor=anchor)
-    stack.begin_run(1)
-    out = [stack.step(s) for s in scans]
+    out = _run_reporting(loc, anchor, grid, scans, on=on)
     assert loc.restarts == 0 and anchor.restarts == []
     pub = np.array([o.pose_xytheta for o in out])
     locp = np.array([o.localizer_pose_xytheta for o in out])
@@ -1151,15 +1157,7 @@ def test_the_anchor_is_not_reported_where_its_pose_explains_the_scan_worse():
     scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0,
                        odom_pose_xytheta=odom[i], stamp_s=0.1 * i) for i in range(40)]
     loc = _StartedStuck(truth, (0.0, 0.0, 0.0))
-    loc.update_map_region = lambda cells, ix0, iy0: None
-    anchor = _EstimatingAnchor(truth, range(10, 40), bias=slip)
-    stack = LocalizationStack(loc, None, _MapOnly(grid),
-                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
-                                           relocalize=False, publish_pose="localizer",
-                                           publish_anchor_when_apart=True),
-                              anchor=anchor)
-    stack.begin_run(1)
-    out = [stack.step(s) for s in scans]
+    out = _run_reporting(loc, _EstimatingAnchor(truth, range(10, 40), bias=slip), grid, scans)
     np.testing.assert_allclose([o.pose_xytheta for o in out], truth, atol=1e-9)
     assert loc.restarts == 0
 
