@@ -686,11 +686,9 @@ class LocalizationStack:
         (the pose they were started at), with the odometry of ``scan``: the poses they last
         agreed on, from which :meth:`_parted_from_anchor` measures who strayed. None if either
         was not started at a pose (global localization), or cannot tell."""
-        try:
-            (p_loc, c_loc), (p_anchor, c_anchor) = (self.localizer.estimate(),
-                                                     self.anchor.estimate())
-        except AttributeError:  # a localizer without estimate(): nothing to tell
-            return None
+        if not all(callable(getattr(f, "estimate", None)) for f in (self.localizer, self.anchor)):
+            return None  # a localizer that cannot say where it stands
+        (p_loc, c_loc), (p_anchor, c_anchor) = self.localizer.estimate(), self.anchor.estimate()
         # a cloud spread over the map has no pose to stray from
         if max(c_loc[0, 0] + c_loc[1, 1], c_anchor[0, 0] + c_anchor[1, 1]) > 1.0:
             return None
