@@ -95,3 +95,65 @@ def test_extent_excess_is_none_without_returns_near_the_object_and_ignores_far_o
     assert extent_excess(stool, stool.pose_xytheta, with_far) == pytest.approx(
         extent_excess(stool, stool.pose_xytheta, own))
     assert extent_excess(stool, stool.pose_xytheta, own) < 0.04
+
+
+def test_a_chairs_lines_are_found_once_for_all_candidates_and_never_served_stale(monkeypatch):
+    """candidate_rotations keeps the last few point sets' lines (one chair is matched against
+    every candidate object in turn): the same answer as finding them afresh, found once per
+    point set, and a set changed in place is a new set."""
+    from gatmo.objects import matching
+
+    rng = np.random.default_rng(3)
+    box = _laser_built(0.9, 0.45, [0.0, 0.0, 0.0])
+    stool = _laser_built(0.45, 0.45, [0.0, 0.0, 0.0])
+    fields = [matching.EdgeField(o, CFG.match_edge_sigma_m) for o in (box, stool)]
+    calls = []
+    real = matching.line_directions
+    monkeypatch.setattr(matching, "line_directions",
+                        lambda p, *a, **k: calls.append(1) or real(p, *a, **k))
+    monkeypatch.setattr(matching, "_AXES", matching._AxesCache(size=2))
+    pts = np.vstack(_corner_scans(0.9, 0.45, [3.0, 1.0, 0.5], rng, n=3))
+
+    def fresh(points, field):
+        # the rotations as computed before the cache: lines and principal axis afresh
+        cands = []
+        for a in real(points):
+            for o in field.lines:
+                cands += [a - o, a - o + np.pi]
+        a_p = matching.principal_angle(points)
+        cands += [a_p - field.principal + k * np.pi / 2 for k in range(4)]
+        out = []
+        for th in cands:
+            th = float(matching.wrap_angle(th))
+            if all(abs(matching.wrap_angle(th - o)) > np.radians(2.5) for o in out):
+                out.append(th)
+        return np.array(out)
+
+    for field in fields * 2:
+        np.testing.assert_array_equal(matching.candidate_rotations(pts, field),
+                                      fresh(pts, field))
+    assert len(calls) == 1
+    turned = transform_points(np.array([0.0, 0.0, 0.7]), pts)
+    pts[:] = turned  # the same array, new contents
+    np.testing.assert_array_equal(matching.candidate_rotations(pts, fields[0]),
+                                  fresh(turned, fields[0]))
+    assert len(calls) == 2
+    # a bounded cache: the oldest set leaves first
+    for k in range(3):
+        matching.candidate_rotations(pts + k, fields[0])
+    assert len(matching._AXES._d) == 2
+
+
+@pytest.mark.parametrize("levels", [None, 7])
+def test_best_first_is_a_stable_sorts_head(levels):
+    """The coarse search's picks (matching._best_first) are the head of a stable sort, highest
+    first, whether or not scores tie (quantized scores tie often: ``levels``)."""
+    from gatmo.objects.matching import _best_first
+
+    rng = np.random.default_rng(5)
+    for n in (1, 5, 200, 201, 5000):
+        s = rng.random(n)
+        if levels:
+            s = np.round(s * levels) / levels
+        want = np.argsort(-s, kind="stable")[:200]
+        np.testing.assert_array_equal(_best_first(s, 200), want)
