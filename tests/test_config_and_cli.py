@@ -169,3 +169,19 @@ def test_cli_config_dump_writes_descriptions(capsys):
     assert yaml.safe_load(out) == yaml.safe_load(dump_model(GatmoConfig()))
     assert main(["config", "dump", "gatmo", "--no-comments"]) == 0
     assert capsys.readouterr().out == dump_model(GatmoConfig())
+
+
+@pytest.mark.parametrize("user", [None, "ACTIVE"])
+def test_importing_gatmo_makes_openmp_wait_passively_unless_the_user_said_otherwise(user):
+    """numba's OpenMP threads spin while idle by default, and two gatmo processes on the same
+    cores slowed each other 3-7x (docs/experiments.md, forty-eighth session): importing gatmo
+    sets OMP_WAIT_POLICY=PASSIVE, before any kernel starts the runtime, unless it is set."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    if user:
+        env["OMP_WAIT_POLICY"] = user
+    code = "import os, gatmo; print(os.environ['OMP_WAIT_POLICY'])"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       check=True)
+    assert r.stdout.strip() == (user or "PASSIVE")
