@@ -458,18 +458,29 @@ class Relocalizer:
     def __init__(self, fusion: FusionConfig):
         self.fusion = fusion
         self._pts = self._tree = self._normals = self._field = None
+        self._resolution_m = 0.05
 
     def set_grid(self, grid: OccupancyGrid) -> None:
+        """The map's edges and their tree, for :meth:`fit` on every update; the search's
+        normals and field wait for the next :meth:`search` (a search is rare, a map change on
+        a large map is not: building both on each change was a seventh of the stack's time on
+        MIT CSAIL)."""
         from scipy.spatial import cKDTree
-
-        from gatmo.scanmatch.correlative import likelihood_field
-        from gatmo.scanmatch.icp import normals_of
 
         self._pts = _edge_points(grid)
         self._tree = cKDTree(self._pts) if len(self._pts) >= 20 else None
-        if self._tree is not None:  # once per map, not once per search
+        self._normals = self._field = None
+        self._resolution_m = grid.resolution_m
+
+    def _search_aids(self) -> None:
+        """Build the normals and the likelihood field of the current map's edges, once per
+        map, before a search."""
+        from gatmo.scanmatch.correlative import likelihood_field
+        from gatmo.scanmatch.icp import normals_of
+
+        if self._field is None:
             self._normals, _ = normals_of(self._pts, self._tree)
-            self._field = likelihood_field(self._pts, resolution_m=grid.resolution_m,
+            self._field = likelihood_field(self._pts, resolution_m=self._resolution_m,
                                            sigma_m=self.fusion.relocalize_fit_m)
 
     @property
@@ -492,6 +503,7 @@ class Relocalizer:
         from gatmo.scanmatch.correlative import MatchConfig, match_to_submap
 
         f = self.fusion
+        self._search_aids()
         # a second peak counts as a rival place when it is 0.3 m away; a turn of the same
         # place (the search's heading steps) is no rival
         m = match_to_submap(points_base_xy, self._pts, pose_xytheta,

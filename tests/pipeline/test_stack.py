@@ -907,6 +907,13 @@ def test_relocalizer_fit_and_search_on_known_poses():
         r = Relocalizer(FusionConfig(relocalize_window_m=window_m))
         r.set_grid(grid)
         assert r.search(off, pts) is None
+    # the search's normals and field are built at the first search after a map change, not
+    # on the change (the fit on every update needs neither)
+    r.set_grid(grid)
+    assert r._field is None and r._normals is None and r.fit(truth[0], pts) > 0.95
+    assert r._field is None
+    r.search(off, pts)
+    assert r._field is not None and r._normals is not None
 
 
 def test_a_filter_that_is_not_confident_is_left_to_find_its_way():
