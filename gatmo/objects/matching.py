@@ -4,6 +4,7 @@ a gaussian-blurred grid of the object's edge points with a local search around i
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,16 +134,20 @@ class _AxesCache:
     def __init__(self, size: int = 8):
         self.size = size
         self._d: dict[tuple, tuple[tuple[float, ...], float]] = {}
+        self._lock = threading.Lock()  # one module-wide cache: stacks in threads share it
 
     def get(self, points_xy: np.ndarray) -> tuple[tuple[float, ...], float]:
         pts = np.ascontiguousarray(points_xy, dtype=float)
         key = (pts.shape, pts.tobytes())
-        hit = self._d.pop(key, None)
+        with self._lock:
+            hit = self._d.pop(key, None)
         if hit is None:
             hit = (tuple(line_directions(pts)), principal_angle(pts))
-            if len(self._d) >= self.size:
+        with self._lock:
+            self._d.pop(key, None)
+            while len(self._d) >= self.size:
                 self._d.pop(next(iter(self._d)))
-        self._d[key] = hit  # the most recent last
+            self._d[key] = hit  # the most recent last
         return hit
 
 
