@@ -326,13 +326,13 @@ class GatmoMapper:
         if not parts:
             return None
         g = self._grid
-        cells = g.world_to_cell(np.vstack(parts))
-        cells = cells[g.in_bounds(cells)]
+        groups = [cl[g.in_bounds(cl)] for cl in (g.world_to_cell(q) for q in parts)]
+        cells = np.vstack(groups)
         mask = np.zeros(g.cells.shape, dtype=bool)
         mask[cells[:, 1], cells[:, 0]] = True
         r = int(np.ceil(c.provisional_near_m / g.resolution_m))
         yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-        self._prov_near = _dilated(mask, xx**2 + yy**2 <= r * r)
+        self._prov_near = _dilated(mask, xx**2 + yy**2 <= r * r, groups)
         return mask
 
     # ------------------------------------------------------------------ runs
@@ -1684,16 +1684,32 @@ def _changed_regions(after: np.ndarray, before: np.ndarray) -> list[tuple[np.nda
     return out
 
 
-def _dilated(mask: np.ndarray, structure: np.ndarray) -> np.ndarray:
+def _dilated(mask: np.ndarray, structure: np.ndarray,
+             groups: list[np.ndarray] | None = None) -> np.ndarray:
     """``ndimage.binary_dilation(mask, structure)`` for a mask (H, W) and a square structure
     of odd side 2r + 1, dilated within the window r cells past the mask's cells only: nothing
     beyond reaches, and dilating the whole of a large map on every provisional landmark's
-    change was a sixth of the stack's time on MIT CSAIL."""
+    change was a sixth of the stack's time on MIT CSAIL. ``groups``: the mask's cells
+    (K, 2) (x, y) in groups that lie apart (landmarks across the map), each dilated within
+    its own window; every cell of the mask must be in one."""
     out = np.zeros_like(mask, dtype=bool)
-    win = _window(mask, structure.shape[0] // 2)
-    if win is not None:
-        out[win] = ndimage.binary_dilation(mask[win], structure=structure)
+    r = structure.shape[0] // 2
+    wins = [_window(mask, r)] if groups is None else [_cells_window(q, r, mask.shape)
+                                                      for q in groups]
+    for win in wins:
+        if win is not None:
+            out[win] |= ndimage.binary_dilation(mask[win], structure=structure)
     return out
+
+
+def _cells_window(cells: np.ndarray, margin: int,
+                  shape: tuple[int, int]) -> tuple[slice, slice] | None:
+    """:func:`_window` of the cells (K, 2) (x, y) of a grid of ``shape`` (H, W)."""
+    if len(cells) == 0:
+        return None
+    lo, hi = cells.min(axis=0), cells.max(axis=0)
+    return (slice(max(lo[1] - margin, 0), min(hi[1] + margin + 1, shape[0])),
+            slice(max(lo[0] - margin, 0), min(hi[0] + margin + 1, shape[1])))
 
 
 def _max3x3_at(counts: np.ndarray, cy: np.ndarray, cx: np.ndarray) -> np.ndarray:

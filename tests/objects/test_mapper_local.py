@@ -34,7 +34,12 @@ def test_dilating_within_the_window_is_dilating_the_whole_grid(r):
         m = np.zeros((60, 70), dtype=bool)
         n = rng.integers(0, 6)
         m[rng.integers(0, 60, n), rng.integers(0, 70, n)] = True  # the borders included
-        np.testing.assert_array_equal(_dilated(m, disk), ndimage.binary_dilation(m, disk))
+        want = ndimage.binary_dilation(m, disk)
+        np.testing.assert_array_equal(_dilated(m, disk), want)
+        # the cells in groups that lie apart, each dilated in its own window
+        xy = np.argwhere(m)[:, ::-1]
+        groups = [xy[xy[:, 0] < 35], xy[xy[:, 0] >= 35]]
+        np.testing.assert_array_equal(_dilated(m, disk, groups), want)
 
 
 def _regions_whole_grid(after, before):
