@@ -406,12 +406,14 @@ class MapAligner:
         #: at the pose it converged to (0 when it did not run)
         self.last_tight_fraction = 0.0
 
-    def set_grid(self, grid: OccupancyGrid) -> None:
+    def set_grid(self, grid: OccupancyGrid, edges_xy: np.ndarray | None = None) -> None:
+        """Align against ``grid``'s edges: ``edges_xy`` (M, 2), its :func:`_edge_points`
+        if already worked out."""
         from scipy.spatial import cKDTree
 
         from gatmo.scanmatch.icp import normals_of
 
-        self._pts = _edge_points(grid)
+        self._pts = _edge_points(grid) if edges_xy is None else edges_xy
         self._tree = cKDTree(self._pts) if len(self._pts) >= 10 else None
         if self._tree is not None:
             self._normals, _ = normals_of(self._pts, self._tree)
@@ -460,14 +462,14 @@ class Relocalizer:
         self._pts = self._tree = self._normals = self._field = None
         self._resolution_m = 0.05
 
-    def set_grid(self, grid: OccupancyGrid) -> None:
-        """The map's edges and their tree, for :meth:`fit` on every update; the search's
-        normals and field wait for the next :meth:`search` (a search is rare, a map change on
-        a large map is not: building both on each change was a seventh of the stack's time on
-        MIT CSAIL)."""
+    def set_grid(self, grid: OccupancyGrid, edges_xy: np.ndarray | None = None) -> None:
+        """The map's edges (``edges_xy`` (M, 2), its :func:`_edge_points` if already worked
+        out) and their tree, for :meth:`fit` on every update; the search's normals and field
+        wait for the next :meth:`search` (a search is rare, a map change on a large map is
+        not: building both on each change was a seventh of the stack's time on MIT CSAIL)."""
         from scipy.spatial import cKDTree
 
-        self._pts = _edge_points(grid)
+        self._pts = _edge_points(grid) if edges_xy is None else edges_xy
         self._tree = cKDTree(self._pts) if len(self._pts) >= 20 else None
         self._normals = self._field = None
         self._resolution_m = grid.resolution_m
@@ -647,6 +649,9 @@ class LocalizationStack:
         # odometry it was found at and how many updates in a row agreed, and the restarts
         self._reloc: Relocalizer | None = None
         self._reloc_stale = True
+        # the current map (a copy) and its edge points, shared by the alignment and the
+        # relocalizer; None: work them out again (the map changed)
+        self._edges: tuple[OccupancyGrid, np.ndarray] | None = None
         self._reloc_found: tuple[np.ndarray, np.ndarray, int] | None = None
         # odometry at the last update, and the travel since the filter last fitted the map
         self._reloc_odom: np.ndarray | None = None
@@ -664,6 +669,7 @@ class LocalizationStack:
         self._published_anchor = None
         self._reloc_found = None
         self._reloc_stale = True
+        self._edges = None
         self._reloc_odom, self._reloc_travel_m = None, 0.0
         self._anchor_apart = 0
         self._anchor_ref = None
@@ -684,9 +690,17 @@ class LocalizationStack:
         if self._reloc is None:
             self._reloc = Relocalizer(self.fusion)
         if self._reloc_stale:
-            self._reloc.set_grid(self._map_grid())
+            self._reloc.set_grid(*self._map_edges())
             self._reloc_stale = False
         return self._reloc
+
+    def _map_edges(self) -> tuple[OccupancyGrid, np.ndarray]:
+        """The current map (a copy) and its :func:`_edge_points`, worked out once per change
+        of the map for the alignment and the relocalizer both."""
+        if self._edges is None:
+            grid = self._map_grid()
+            self._edges = (grid, _edge_points(grid))
+        return self._edges
 
     def _restart_cov(self) -> np.ndarray:
         """(3, 3) covariance of a filter started again by the stack (relocalize_std_*)."""
@@ -917,7 +931,7 @@ class LocalizationStack:
             verified = pose_ok
             if self.fusion.align_to_map and self._aligner is None:
                 self._aligner = MapAligner(self.fusion)
-                self._aligner.set_grid(self._map_grid())
+                self._aligner.set_grid(*self._map_edges())
             if pose_ok and self.fusion.align_to_map:
                 map_pose, pose_ok = self._aligner.refine(pose, scan)
                 verified = self._aligner.last_verified
@@ -927,8 +941,10 @@ class LocalizationStack:
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
                                         stamp_s=scan.stamp_s, pose_verified=verified)
             changed = self._apply_map_changes()
+            if changed:
+                self._edges = None
             if changed and self._aligner is not None:
-                self._aligner.set_grid(self._map_grid())
+                self._aligner.set_grid(*self._map_edges())
             self._reloc_stale = self._reloc_stale or changed
         self.n_scans += 1
         published = _wrapped(loc_pose)
@@ -1072,6 +1088,7 @@ class LocalizationStack:
         self._apply_map_changes()
         self._aligner = None  # rebuilt from the new map on first use
         self._reloc_stale = True
+        self._edges = None
         return events
 
     def current_grid(self, base: OccupancyGrid) -> OccupancyGrid:

@@ -1248,3 +1248,24 @@ def test_a_filter_that_corrects_itself_is_not_sent_back_to_a_worse_anchor(fit_ma
         err = np.hypot(*(np.array([o.localizer_pose_xytheta for o in out])[10:, :2]
                          - truth[10:, :2]).T)
         assert err.max() < 1e-9
+
+
+def test_the_alignment_and_the_relocalizer_share_one_edge_extraction_per_map(monkeypatch):
+    """The map's edge points are worked out once per version of the map for both the
+    scan-to-map alignment and the relocalizer (each eroded the whole map on every change),
+    and again after the map may have changed (a new run)."""
+    from gatmo.pipeline import stack as stack_mod
+
+    calls = []
+    real = stack_mod._edge_points
+    monkeypatch.setattr(stack_mod, "_edge_points", lambda g: calls.append(1) or real(g))
+    grid = room_grid(12, 6, 0.05)
+    st = LocalizationStack(None, fusion=FusionConfig(), loc_grid=grid)
+    reloc = st._relocalizer()
+    aligner = stack_mod.MapAligner(st.fusion)
+    aligner.set_grid(*st._map_edges())
+    assert len(calls) == 1 and aligner._pts is reloc._pts
+    np.testing.assert_array_equal(reloc._pts, real(grid))
+    st.begin_run(2)
+    st._relocalizer()
+    assert len(calls) == 2
