@@ -1657,9 +1657,8 @@ def _window(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     if len(rows) == 0:
         return None
-    h, w = mask.shape
-    return (slice(max(rows[0] - margin, 0), min(rows[-1] + margin + 1, h)),
-            slice(max(cols[0] - margin, 0), min(cols[-1] + margin + 1, w)))
+    corners = np.array([[cols[0], rows[0]], [cols[-1], rows[-1]]])
+    return _cells_window(corners, margin, mask.shape)
 
 
 def _changed_regions(after: np.ndarray, before: np.ndarray) -> list[tuple[np.ndarray, int, int]]:
@@ -1719,10 +1718,11 @@ def _max3x3_at(counts: np.ndarray, cy: np.ndarray, cx: np.ndarray) -> np.ndarray
     grid on every scan (on MIT CSAIL's map that was a quarter of the stack's time)."""
     h, w = counts.shape
     out = counts[cy, cx].copy()
+    xs = [np.clip(cx + dx, 0, w - 1) for dx in (-1, 0, 1)]
     for dy in (-1, 0, 1):
         yy = np.clip(cy + dy, 0, h - 1)
-        for dx in (-1, 0, 1):
-            np.maximum(out, counts[yy, np.clip(cx + dx, 0, w - 1)], out=out)
+        for xx in xs:
+            np.maximum(out, counts[yy, xx], out=out)
     return out
 
 
