@@ -257,6 +257,12 @@ class GatmoConfig(GatmoModel):
     add_min_cells: int = Field(
         10, ge=1, description="a Gamma object seen this run with fewer cells is not added to "
         "the map at the run's end")
+    absence_looks_near: bool = Field(
+        False, description="beyond the paper: before an object is marked absent, it is matched "
+        "onto this run's returns around its outline (within nudge_max_shift_m, nearer to it "
+        "than to anything else); a match that passes the nudge's tests relocates it there, "
+        "keeping its id (a piece shifted by about its size: rays pass its old cells, and its "
+        "returns are beside them)")
     nudge: bool = Field(
         True, description="beyond the paper: an object whose returns miss its outline while "
         "the rest of the scan fits the map (a piece shifted by less than its size) is matched "

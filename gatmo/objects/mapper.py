@@ -143,7 +143,7 @@ class GatmoMapper:
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "unexplained_sparse": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
-                       "seen_through_scans": 0, "gamma_flicker": 0}
+                       "seen_through_scans": 0, "gamma_flicker": 0, "shifted_not_gone": 0}
         self._ms: list[float] = []
         self._beams = None
         self._sparse_agrees = False  # the last pose test: too few beams, those agreeing
@@ -822,8 +822,51 @@ class GatmoMapper:
                 else:
                     gone.append(o)
         for o in gone:  # after the loop: marking re-renders and re-indexes the owner grid
-            if o.status in ("U", "M"):
+            if o.status not in ("U", "M"):
+                continue
+            mt = self._shifted_fit(o) if c.absence_looks_near else None
+            if mt is not None:
+                self._relocate(o, mt, stamp_s, events)
+                self.counts["shifted_not_gone"] += 1
+            else:
                 self._mark_absent(o, stamp_s, events)
+
+    def _shifted_fit(self, o: MapObject):
+        """(absence_looks_near) ``o`` matched onto this run's returns around its outline:
+        cells within ``nudge_max_shift_m`` of it hit at least twice (``_near_returns``),
+        nearer to it than to any other object or wall; the match if it passes the nudge's
+        tests (score, chair_min_cells of returns, not larger, a shift, free space), else
+        None."""
+        c = self.cfg
+        g = self._grid
+        idx = self.object_map.objects.index(o)
+        cells = g.world_to_cell(o.cells_world(dense=True))
+        cells = cells[g.in_bounds(cells)]
+        win = _cells_window(cells, int(np.ceil(c.nudge_max_shift_m / g.resolution_m)) + 1,
+                            g.cells.shape)
+        if win is None:
+            return None
+        sy, sx = win
+        mask = np.zeros((sy.stop - sy.start, sx.stop - sx.start), dtype=bool)
+        mask[cells[:, 1] - sy.start, cells[:, 0] - sx.start] = True
+        d = ndimage.distance_transform_edt(~mask) * g.resolution_m
+        keep = ((d <= c.nudge_max_shift_m) & (self._near_returns[win] >= 2)
+                & ((self._near_owner[win] == idx) | (self._near_dist[win] > c.delta_W_m)))
+        iy, ix = np.nonzero(keep)
+        # which object is given (the returns are its own): no look-alikes to tell apart, so
+        # less of it than a chair needs (match_min_edge_fraction)
+        if len(iy) < c.chair_min_cells:
+            return None
+        pts = g.cell_to_world(np.stack([ix + sx.start, iy + sy.start], axis=1))
+        if _larger_than(_diameter(pts), o):
+            return None
+        mt = self._match(pts, o)
+        if (mt.score < c.match_min_score
+                or _footprint_shift_m(o, o.pose_xytheta, mt.pose_xytheta) <= c.nudge_min_shift_m
+                or _move_m(o, mt) > c.nudge_max_shift_m
+                or not self._free_consistent(o, mt)):
+            return None
+        return mt
 
     def _mark_seen_through(self, lp, ends) -> None:
         """Rays from the laser at ``lp`` to ``ends`` (R, 2): the cells they cross are seen
