@@ -263,6 +263,9 @@ class GatmoConfig(GatmoModel):
         "than to anything else); a match that passes the nudge's tests relocates it there, "
         "keeping its id (a piece shifted by about its size: rays pass its old cells, and its "
         "returns are beside them)")
+    absence_near_min_edge_fraction: float = Field(
+        0.2, ge=0, le=1, description="absence_looks_near: the returns gathered must cover at "
+        "least this fraction of the object's edge cells (and chair_min_cells)")
     nudge: bool = Field(
         True, description="beyond the paper: an object whose returns miss its outline while "
         "the rest of the scan fits the map (a piece shifted by less than its size) is matched "

@@ -835,8 +835,8 @@ class GatmoMapper:
         """(absence_looks_near) ``o`` matched onto this run's returns around its outline:
         cells within ``nudge_max_shift_m`` of it hit at least twice (``_near_returns``),
         nearer to it than to any other object or wall; the match if it passes the nudge's
-        tests (score, chair_min_cells of returns, not larger, a shift, free space), else
-        None."""
+        tests (score, ``absence_near_min_edge_fraction`` of its edge cells in returns, not
+        larger, a shift, free space), else None."""
         c = self.cfg
         g = self._grid
         idx = self.object_map.objects.index(o)
@@ -854,8 +854,9 @@ class GatmoMapper:
                 & ((self._near_owner[win] == idx) | (self._near_dist[win] > c.delta_W_m)))
         iy, ix = np.nonzero(keep)
         # which object is given (the returns are its own): no look-alikes to tell apart, so
-        # less of it than a chair needs (match_min_edge_fraction)
-        if len(iy) < c.chair_min_cells:
+        # less of it than a chair needs (match_min_edge_fraction), but not a speck that fits
+        # any end of a larger piece beside it
+        if len(iy) < max(c.chair_min_cells, c.absence_near_min_edge_fraction * len(o.edge_xy)):
             return None
         pts = g.cell_to_world(np.stack([ix + sx.start, iy + sy.start], axis=1))
         if _larger_than(_diameter(pts), o):
