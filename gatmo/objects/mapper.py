@@ -839,26 +839,19 @@ class GatmoMapper:
         larger, a shift, free space), else None."""
         c = self.cfg
         g = self._grid
-        idx = self.object_map.objects.index(o)
-        cells = g.world_to_cell(o.cells_world(dense=True))
-        cells = cells[g.in_bounds(cells)]
-        win = _cells_window(cells, int(np.ceil(c.nudge_max_shift_m / g.resolution_m)) + 1,
-                            g.cells.shape)
-        if win is None:
+        near = self._outline_distance(o, o.pose_xytheta, c.nudge_max_shift_m)
+        if near is None:
             return None
-        sy, sx = win
-        mask = np.zeros((sy.stop - sy.start, sx.stop - sx.start), dtype=bool)
-        mask[cells[:, 1] - sy.start, cells[:, 0] - sx.start] = True
-        d = ndimage.distance_transform_edt(~mask) * g.resolution_m
+        win, _, d = near
         keep = ((d <= c.nudge_max_shift_m) & (self._near_returns[win] >= 2)
-                & ((self._near_owner[win] == idx) | (self._near_dist[win] > c.delta_W_m)))
+                & self._own_or_unmapped(win, self.object_map.objects.index(o)))
         iy, ix = np.nonzero(keep)
         # which object is given (the returns are its own): no look-alikes to tell apart, so
         # less of it than a chair needs (match_min_edge_fraction), but not a speck that fits
         # any end of a larger piece beside it
         if len(iy) < max(c.chair_min_cells, c.absence_near_min_edge_fraction * len(o.edge_xy)):
             return None
-        pts = g.cell_to_world(np.stack([ix + sx.start, iy + sy.start], axis=1))
+        pts = g.cell_to_world(np.stack([ix + win[1].start, iy + win[0].start], axis=1))
         if _larger_than(_diameter(pts), o):
             return None
         mt = self._match(pts, o)
@@ -1397,6 +1390,27 @@ class GatmoMapper:
             return True
         return False
 
+    def _outline_distance(self, o: MapObject, pose_xytheta: np.ndarray, reach_m: float):
+        """(window (rows, columns) of the grid reaching ``reach_m`` past ``o`` placed at
+        ``pose_xytheta``, its cells in that window (bool), the distance [m] of every window
+        cell to them), or None when the object is off the map."""
+        g = self._grid
+        cells = g.world_to_cell(o.cells_world(pose_xytheta, dense=True))
+        ok = g.in_bounds(cells)
+        if not ok.any():
+            return None
+        cells = np.unique(cells[ok], axis=0)
+        win = _cells_window(cells, int(np.ceil(reach_m / g.resolution_m)) + 1, g.cells.shape)
+        sy, sx = win
+        mask = np.zeros((sy.stop - sy.start, sx.stop - sx.start), dtype=bool)
+        mask[cells[:, 1] - sy.start, cells[:, 0] - sx.start] = True
+        return win, mask, ndimage.distance_transform_edt(~mask) * g.resolution_m
+
+    def _own_or_unmapped(self, win, own_index: int) -> np.ndarray:
+        """Of the cells in the window ``win``: nearer to the object of index ``own_index``
+        than to anything else, or beyond delta_W of the map (bool)."""
+        return (self._near_owner[win] == own_index) | (self._near_dist[win] > self.cfg.delta_W_m)
+
     def _ring_counts(self, o: MapObject, pose_xytheta: np.ndarray, counts: np.ndarray,
                      r_in_m: float, r_out_m: float, min_hits: int = 2,
                      own_index: int | None = None) -> tuple[int, int]:
@@ -1405,23 +1419,13 @@ class GatmoMapper:
         (a per-cell grid of returns this run). With ``own_index`` (the object's index in the
         map), ring cells nearer to another object or wall are left out. -1, -1 when the
         object is off the map."""
-        g = self._grid
-        cells = g.world_to_cell(o.cells_world(pose_xytheta, dense=True))
-        ok = g.in_bounds(cells)
-        if not ok.any():
+        near = self._outline_distance(o, pose_xytheta, r_out_m)
+        if near is None:
             return -1, -1
-        cells = np.unique(cells[ok], axis=0)
-        pad = int(np.ceil(r_out_m / g.resolution_m)) + 1
-        lo = np.maximum(cells.min(axis=0) - pad, 0)
-        hi = np.minimum(cells.max(axis=0) + pad + 1, [g.width, g.height])
-        win = (slice(lo[1], hi[1]), slice(lo[0], hi[0]))
-        mask = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
-        mask[cells[:, 1] - lo[1], cells[:, 0] - lo[0]] = True
-        d = ndimage.distance_transform_edt(~mask) * g.resolution_m
+        win, mask, d = near
         ring = (d > r_in_m) & (d <= r_out_m)
         if own_index is not None:
-            ring &= (self._near_owner[win] == own_index) | \
-                (self._near_dist[win] > self.cfg.delta_W_m)
+            ring &= self._own_or_unmapped(win, own_index)
         hit = counts[win] >= min_hits
         return int(hit[mask].sum()), int(hit[ring].sum())
 
