@@ -177,7 +177,7 @@ class FusionConfig(GatmoModel):
         "gatmo_pose_carry_m": 0.0, "motion_from_matcher": False,
         "matcher_motion_max_gap_m": 0.2, "matcher_motion_max_gap_deg": 10.0,
         "bridge_evidence": False, "bridge_max_closure_m": 0.02, "bridge_max_closure_deg": 1.0,
-        "bridge_max_travel_m": 3.0, "anchor_gates_gatmo": False, "anchor_gate_gap_m": 0.15}
+        "bridge_max_travel_m": 3.0}
 
     use_scan_matcher: bool = Field(
         True, description="run the ICP scan matcher beside the localizer; its frame is reset "
@@ -358,6 +358,15 @@ class FusionConfig(GatmoModel):
         "(anchor_fit_margin), the stack reports the anchor's pose (the localizer "
         "is not started again until anchor_gap_updates say so; GATMO still gets only the "
         "localizer's trusted poses)")
+    anchor_gates_gatmo: bool = Field(
+        False, description="with anchor_filter: GATMO is handed no scan on which the localizer "
+        "and the anchor filter are more than anchor_gate_gap_m apart. Two filters that far "
+        "apart put the pose in doubt, and on a straight with little but moved furniture in "
+        "view the scan-to-map alignment can confirm a pose 0.9 m off (docs/experiments.md, "
+        "forty-fifth and fiftieth sessions)")
+    anchor_gate_gap_m: float = Field(
+        0.3, gt=0, description="see anchor_gates_gatmo (0.15 until the fiftieth session, "
+        "when the option was removed: it kept from GATMO the scans that noticed pieces gone)")
     passes: int = Field(
         1, ge=1, le=4, description="passes over each log (offline): every pass after the "
         "first localizes on the map the pass before ended with, fixed, and GATMO starts again "
@@ -616,6 +625,7 @@ class LocalizationStack:
         # (localizer pose, anchor pose, odometry) at the last update the two agreed on
         self._anchor_ref: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.anchor_restarts = 0  # the anchor started again at the localizer's pose
+        self.anchor_gated = 0  # scans kept from GATMO as the two filters disagreed
         # a fixed map for the localizer, the alignment and the relocalizer (a second pass,
         # ``fusion.passes``); None: GATMO's current map, updated as it changes
         self.loc_grid = loc_grid
@@ -800,6 +810,17 @@ class LocalizationStack:
         self._anchor_ref = (loc_pose.copy(), loc_pose.copy(), odom.copy())
         return None
 
+    def _anchor_disagrees(self, anchor_est, loc_pose: np.ndarray) -> bool:
+        """``anchor_gates_gatmo``: the anchor filter's pose is more than ``anchor_gate_gap_m``
+        from the localizer's ``loc_pose`` (3,) on this scan. On hall seeds 403, 405 and 412,
+        of the scans GATMO was handed with a pose 0.2 m or more off, 83-100 % were more than
+        0.15 m apart; of those within 0.1 m, 1-2 % (docs/experiments.md, forty-fifth
+        session)."""
+        if anchor_est is None or not self.fusion.anchor_gates_gatmo:
+            return False
+        a = np.asarray(anchor_est.pose_xytheta, dtype=float)
+        return bool(np.hypot(*(a[:2] - loc_pose[:2])) > self.fusion.anchor_gate_gap_m)
+
     def _restart_at(self, pose_xytheta: np.ndarray, stamp_s: float,
                     from_xytheta: np.ndarray) -> None:
         """Start the localizer again at a pose the stack found (relocalize_std_*), recorded in
@@ -927,6 +948,9 @@ class LocalizationStack:
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
             pose_ok = pose_ok and self._settle_left_m <= 0.0
+            if pose_ok and self._anchor_disagrees(anchor_est, loc_pose):
+                pose_ok = False
+                self.anchor_gated += 1
             map_pose = pose
             verified = pose_ok
             if self.fusion.align_to_map and self._aligner is None:

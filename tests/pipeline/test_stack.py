@@ -1169,6 +1169,36 @@ def test_the_anchor_is_not_reported_where_its_pose_explains_the_scan_worse():
     assert loc.restarts == 0
 
 
+@pytest.mark.parametrize("bias_m, on, gated", [
+    (0.4, True, range(10, 14)),  # 0.4 m apart on 4 updates: GATMO gets none of those scans
+    (0.4, False, ()),  # (off: every confident scan, as before)
+    (0.25, True, ()),  # within anchor_gate_gap_m (0.3 m)
+])
+def test_gatmo_gets_no_scan_while_the_two_filters_are_far_apart(bias_m, on, gated):
+    """``anchor_gates_gatmo``: on the scans where the anchor filter stands more than
+    ``anchor_gate_gap_m`` from the localizer, GATMO is handed no pose (it is in doubt); on the
+    others, the localizer's. 4 updates apart start neither filter again."""
+    grid, truth, scans = _reloc_world(40)
+    loc = StuckLocalizer(truth, (0.0, 0.0, 0.0), slip_at=10)
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    anchor = AnchorStandIn(truth, range(10, 14), bias=(bias_m, 0.0, 0.0))
+    mapper = RecordingMapper(grid)
+    stack = LocalizationStack(loc, None, mapper,
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
+                                           relocalize=False, align_to_map=False,
+                                           anchor_gates_gatmo=on),
+                              anchor=anchor)
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    assert loc.restarts == 0 and anchor.restarts == []
+    handed = [o.gatmo_pose_xytheta is not None for o in out]
+    assert [i for i, h in enumerate(handed) if not h] == list(gated)
+    assert stack.anchor_gated == len(gated)
+    np.testing.assert_allclose([o.gatmo_pose_xytheta for o in out if o.gatmo_pose_xytheta
+                                is not None], truth[[i for i, h in enumerate(handed) if h]],
+                               atol=1e-9)
+
+
 def test_no_filter_is_started_again_in_a_wall():
     """A filter is not started again at a pose its map has occupied (``set_initial_pose``
     refuses one, and a lost filter's pose can be in a wall): the anchor that strayed for good
