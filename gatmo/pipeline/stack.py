@@ -362,11 +362,12 @@ class FusionConfig(GatmoModel):
         False, description="with anchor_filter: GATMO is handed no scan on which the localizer "
         "and the anchor filter are more than anchor_gate_gap_m apart. Two filters that far "
         "apart put the pose in doubt, and on a straight with little but moved furniture in "
-        "view the scan-to-map alignment can confirm a pose 0.9 m off (docs/experiments.md, "
-        "forty-fifth and fiftieth sessions)")
+        "view the scan-to-map alignment can confirm a pose 0.9 m off. Measured and left off "
+        "(docs/experiments.md, forty-fifth and fiftieth sessions): it rescues some runs and "
+        "loses others")
     anchor_gate_gap_m: float = Field(
-        0.3, gt=0, description="see anchor_gates_gatmo (0.15 until the fiftieth session, "
-        "when the option was removed: it kept from GATMO the scans that noticed pieces gone)")
+        0.3, gt=0, description="see anchor_gates_gatmo (0.15 m in the forty-fifth session, "
+        "where it also kept from GATMO the scans that noticed pieces gone)")
     passes: int = Field(
         1, ge=1, le=4, description="passes over each log (offline): every pass after the "
         "first localizes on the map the pass before ended with, fixed, and GATMO starts again "
