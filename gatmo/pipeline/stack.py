@@ -235,6 +235,11 @@ class FusionConfig(GatmoModel):
         3.0, description="odometry travel GATMO waits, handed no trusted pose, after the "
         "localizer's pose jumped (max_offset_jump_m), its recovery injected random particles, "
         "or the stack started it again (relocalize, anchor_filter)")
+    settle_until_confirmed: int = Field(
+        0, ge=0, description="after the stack started the filter again at a pose it tested "
+        "(relocalize, anchor_filter), GATMO's wait (settle_after_jump_m) ends early once the "
+        "scan-to-map alignment has confirmed this many of the filter's strictly confident poses "
+        "since; 0: the full wait, as after any jump")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -645,6 +650,7 @@ class LocalizationStack:
         self._last_odom: np.ndarray | None = None
         self._last_precise = False  # the last estimate passed GATMO's strict confidence test
         self._settle_left_m = 0.0
+        self._settle_confirmed = -1  # confirmations since a stack restart (-1: none pending)
         self._injected_seen = 0  # the localizer's random particles counted so far
         # a localizer without the ``withheld`` argument (an older stand-in) gets the masked
         # scan alone
@@ -677,6 +683,7 @@ class LocalizationStack:
         self._last_loc = self._last_odom = None
         self._last_precise = False
         self._settle_left_m = 0.0
+        self._settle_confirmed = -1
         self._published_anchor = None
         self._reloc_found = None
         self._reloc_stale = True
@@ -811,6 +818,19 @@ class LocalizationStack:
         self._anchor_ref = (loc_pose.copy(), loc_pose.copy(), odom.copy())
         return None
 
+    def _settle_after_restart(self, pose_xytheta: np.ndarray, scan: Scan) -> None:
+        """``settle_until_confirmed``: while GATMO waits after a stack restart, align the
+        strictly confident pose ``pose_xytheta`` (3,) to the map; once that many alignments
+        confirmed it, the wait ends (on this scan)."""
+        if self._aligner is None:
+            self._aligner = MapAligner(self.fusion)
+            self._aligner.set_grid(*self._map_edges())
+        _, ok = self._aligner.refine(pose_xytheta, scan)
+        if ok:
+            self._settle_confirmed += 1
+            if self._settle_confirmed >= self.fusion.settle_until_confirmed:
+                self._settle_left_m, self._settle_confirmed = 0.0, -1
+
     def _anchor_disagrees(self, anchor_est, loc_pose: np.ndarray) -> bool:
         """``anchor_gates_gatmo``: the anchor filter's pose is more than ``anchor_gate_gap_m``
         from the localizer's ``loc_pose`` (3,) on this scan. On hall seeds 403, 405 and 412,
@@ -830,6 +850,7 @@ class LocalizationStack:
         self.relocalizations.append((float(stamp_s), from_xytheta.copy(), pose_xytheta.copy()))
         self.localizer.set_initial_pose(pose_xytheta, self._restart_cov())
         self._settle_left_m = self.fusion.settle_after_jump_m
+        self._settle_confirmed = 0
         self.T_map_match = None
         self._published_anchor = None
         # the anchor filter's reference starts again here: the jump is no straying
@@ -874,11 +895,13 @@ class LocalizationStack:
             jump = relative(compose(self._last_loc, d_odom), loc_pose)
             if np.hypot(jump[0], jump[1]) > self.fusion.max_offset_jump_m:
                 self._settle_left_m = self.fusion.settle_after_jump_m
+                self._settle_confirmed = -1  # the filter jumped by itself: the full wait
         # AMCL's recovery injected random particles: the scans fit the filter's own cloud
         # poorly, so it suspects it is lost, and whatever it settles on next is a guess
         injected = _injected(self.localizer)
         if injected > self._injected_seen:
             self._settle_left_m = self.fusion.settle_after_jump_m
+            self._settle_confirmed = -1
         self._injected_seen = injected
         relocalized = False
         # only a confident filter (the paper's reset test) is suspected of being confident and
@@ -948,6 +971,9 @@ class LocalizationStack:
             # scan-to-map alignment below checks every such pose directly
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
+            if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed >= 0
+                    and self.fusion.settle_until_confirmed and self.fusion.align_to_map):
+                self._settle_after_restart(pose, scan)
             pose_ok = pose_ok and self._settle_left_m <= 0.0
             if pose_ok and self._anchor_disagrees(anchor_est, loc_pose):
                 pose_ok = False

@@ -1053,6 +1053,54 @@ def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose
     assert all(o.gatmo_pose_xytheta is None for o in out[restart_at:restart_at + 20])
 
 
+@pytest.mark.parametrize("until_confirmed, first_handed", [
+    (0, None),  # the full 3 m wait: nothing within the 26 scans left
+    (3, 16),  # the restart's scan and the next two confirmed: handed from the third on
+])
+def test_gatmo_waits_after_a_restart_until_the_alignment_confirms_the_new_pose(
+        until_confirmed, first_handed):
+    """``settle_until_confirmed``: the localizer slid 1.1 m and was started again at the
+    anchor filter's (true) pose on scan 14; GATMO's wait after that restart ends once the
+    scan-to-map alignment has confirmed the new pose on that many scans, instead of after
+    ``settle_after_jump_m`` of travel."""
+    grid, truth, scans = _reloc_world(40)
+    loc = StuckLocalizer(truth, (0.9, -0.6, 0.1), slip_at=10)
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    stack = LocalizationStack(loc, None, _OneChange(grid),
+                              FusionConfig(use_scan_matcher=False, anchor_filter=True,
+                                           settle_until_confirmed=until_confirmed),
+                              anchor=AnchorStandIn(truth))
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    assert [i for i, o in enumerate(out) if o.relocalized] == [14]
+    handed = [i for i, o in enumerate(out) if i >= 14 and o.gatmo_pose_xytheta is not None]
+    assert (handed[:1] or [None])[0] == first_handed
+    if first_handed is not None:
+        assert handed == list(range(first_handed, 40))
+        np.testing.assert_allclose(out[first_handed].gatmo_pose_xytheta[:2],
+                                   truth[first_handed, :2], atol=0.02)
+
+
+def test_a_jump_of_the_filter_itself_keeps_the_full_wait_with_settle_until_confirmed():
+    """A jump the filter made by itself (``max_offset_jump_m``; no restart by the stack) is
+    no tested pose: GATMO waits the full ``settle_after_jump_m`` whatever the alignment says
+    (the scan matcher off, odometry exact: the slid filter's pose fits the map nowhere, the
+    returned one everywhere)."""
+    grid, truth, scans = _reloc_world(40)
+    # the filter jumps 0.5 m at scan 10 and back to the truth at scan 12
+    loc = ScriptedLocalizer(truth + np.where(((np.arange(40) >= 10) & (np.arange(40) < 12))
+                                             [:, None], (0.5, 0.0, 0.0), 0.0),
+                            confident_at=range(40))
+    loc.update_map_region = lambda cells, ix0, iy0: None
+    stack = LocalizationStack(loc, None, _OneChange(grid),
+                              FusionConfig(use_scan_matcher=False, relocalize=False,
+                                           settle_until_confirmed=3))
+    stack.begin_run(1)
+    out = [stack.step(s) for s in scans]
+    assert all(o.gatmo_pose_xytheta is None for o in out[10:])
+    assert all(o.gatmo_pose_xytheta is not None for o in out[:10])
+
+
 class _Started:
     """A stand-in's ``estimate()`` before its first update: the pose it was started at
     (``truth[0]``, a 0.1 m cloud), as ``MonteCarloLocalizer`` gives after set_initial_pose."""
