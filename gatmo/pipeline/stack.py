@@ -235,11 +235,13 @@ class FusionConfig(GatmoModel):
         3.0, description="odometry travel GATMO waits, handed no trusted pose, after the "
         "localizer's pose jumped (max_offset_jump_m), its recovery injected random particles, "
         "or the stack started it again (relocalize, anchor_filter)")
-    settle_until_confirmed: int = Field(
-        0, ge=0, description="after the stack started the filter again at a pose it tested "
+    settle_until_confirmed: bool = Field(
+        False, description="after the stack started the filter again at a pose it tested "
         "(relocalize, anchor_filter), GATMO's wait (settle_after_jump_m) ends early once the "
-        "scan-to-map alignment has confirmed this many of the filter's strictly confident poses "
-        "since; 0: the full wait, as after any jump")
+        "scan-to-map alignment has confirmed settle_confirmed_poses of the filter's strictly "
+        "confident poses since; a jump of the filter itself keeps the full wait. Measured and "
+        "left off (docs/experiments.md, fiftieth session)")
+    settle_confirmed_poses: int = Field(3, ge=1, description="see settle_until_confirmed")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -828,7 +830,7 @@ class LocalizationStack:
         _, ok = self._aligner.refine(pose_xytheta, scan)
         if ok:
             self._settle_confirmed += 1
-            if self._settle_confirmed >= self.fusion.settle_until_confirmed:
+            if self._settle_confirmed >= self.fusion.settle_confirmed_poses:
                 self._settle_left_m, self._settle_confirmed = 0.0, -1
 
     def _anchor_disagrees(self, anchor_est, loc_pose: np.ndarray) -> bool:

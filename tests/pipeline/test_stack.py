@@ -1053,22 +1053,24 @@ def test_a_filter_that_parts_from_the_anchor_filter_is_started_again_at_its_pose
     assert all(o.gatmo_pose_xytheta is None for o in out[restart_at:restart_at + 20])
 
 
-@pytest.mark.parametrize("until_confirmed, first_handed", [
-    (0, None),  # the full 3 m wait: nothing within the 26 scans left
-    (3, 16),  # the restart's scan and the next two confirmed: handed from the third on
+@pytest.mark.parametrize("until_confirmed, poses, first_handed", [
+    (False, 3, None),  # the full 3 m wait: nothing within the 26 scans left
+    (True, 3, 16),  # the restart's scan and the next two confirmed: handed from the third on
+    (True, 5, 18),
 ])
 def test_gatmo_waits_after_a_restart_until_the_alignment_confirms_the_new_pose(
-        until_confirmed, first_handed):
+        until_confirmed, poses, first_handed):
     """``settle_until_confirmed``: the localizer slid 1.1 m and was started again at the
     anchor filter's (true) pose on scan 14; GATMO's wait after that restart ends once the
-    scan-to-map alignment has confirmed the new pose on that many scans, instead of after
-    ``settle_after_jump_m`` of travel."""
+    scan-to-map alignment has confirmed the new pose on ``settle_confirmed_poses`` scans,
+    instead of after ``settle_after_jump_m`` of travel."""
     grid, truth, scans = _reloc_world(40)
     loc = StuckLocalizer(truth, (0.9, -0.6, 0.1), slip_at=10)
     loc.update_map_region = lambda cells, ix0, iy0: None
     stack = LocalizationStack(loc, None, _OneChange(grid),
                               FusionConfig(use_scan_matcher=False, anchor_filter=True,
-                                           settle_until_confirmed=until_confirmed),
+                                           settle_until_confirmed=until_confirmed,
+                                           settle_confirmed_poses=poses),
                               anchor=AnchorStandIn(truth))
     stack.begin_run(1)
     out = [stack.step(s) for s in scans]
@@ -1094,7 +1096,7 @@ def test_a_jump_of_the_filter_itself_keeps_the_full_wait_with_settle_until_confi
     loc.update_map_region = lambda cells, ix0, iy0: None
     stack = LocalizationStack(loc, None, _OneChange(grid),
                               FusionConfig(use_scan_matcher=False, relocalize=False,
-                                           settle_until_confirmed=3))
+                                           settle_until_confirmed=True))
     stack.begin_run(1)
     out = [stack.step(s) for s in scans]
     assert all(o.gatmo_pose_xytheta is None for o in out[10:])
