@@ -824,14 +824,19 @@ class LocalizationStack:
         """``settle_until_confirmed``: while GATMO waits after a stack restart, align the
         strictly confident pose ``pose_xytheta`` (3,) to the map; once that many alignments
         confirmed it, the wait ends (on this scan)."""
-        if self._aligner is None:
-            self._aligner = MapAligner(self.fusion)
-            self._aligner.set_grid(*self._map_edges())
-        _, ok = self._aligner.refine(pose_xytheta, scan)
+        _, ok = self._map_aligner().refine(pose_xytheta, scan)
         if ok:
             self._settle_confirmed += 1
             if self._settle_confirmed >= self.fusion.settle_confirmed_poses:
                 self._settle_left_m, self._settle_confirmed = 0.0, -1
+
+    def _map_aligner(self) -> MapAligner:
+        """The scan-to-map alignment on the current map (built on first use; the step hands
+        it each map change)."""
+        if self._aligner is None:
+            self._aligner = MapAligner(self.fusion)
+            self._aligner.set_grid(*self._map_edges())
+        return self._aligner
 
     def _anchor_disagrees(self, anchor_est, loc_pose: np.ndarray) -> bool:
         """``anchor_gates_gatmo``: the anchor filter's pose is more than ``anchor_gate_gap_m``
@@ -982,9 +987,8 @@ class LocalizationStack:
                 self.anchor_gated += 1
             map_pose = pose
             verified = pose_ok
-            if self.fusion.align_to_map and self._aligner is None:
-                self._aligner = MapAligner(self.fusion)
-                self._aligner.set_grid(*self._map_edges())
+            if self.fusion.align_to_map:
+                self._map_aligner()
             if pose_ok and self.fusion.align_to_map:
                 map_pose, pose_ok = self._aligner.refine(pose, scan)
                 verified = self._aligner.last_verified
