@@ -239,8 +239,8 @@ class FusionConfig(GatmoModel):
         False, description="after the stack started the filter again at a pose it tested "
         "(relocalize, anchor_filter), GATMO's wait (settle_after_jump_m) ends early once the "
         "scan-to-map alignment has confirmed settle_confirmed_poses of the filter's strictly "
-        "confident poses since; a jump of the filter itself keeps the full wait. Measured and "
-        "left off (docs/experiments.md, fiftieth session)")
+        "confident poses since; a jump of the filter itself keeps the full wait. Off here, on "
+        "in sim_stack_config (docs/experiments.md, fiftieth and fifty-first sessions)")
     settle_confirmed_poses: int = Field(3, ge=1, description="see settle_until_confirmed")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
