@@ -133,7 +133,8 @@ def summary(rows: list[dict], first: int = 10) -> dict:
     """The README's soak figures: per window of runs (1..first, the rest), the median over runs
     of each side's median error, the mean time lost, runs where the full stack's median error
     is within 5 % of the static localizer's or better, moved pieces found and false
-    relocations, and the mean fraction of the map's pieces placed right; the objects placed
+    relocations, the mean fraction of the map's pieces placed right and the mean counts of
+    duplicate and stale objects after each run; the objects placed
     against the pieces standing, first and last run; peak RSS; the stack's ms per scan (the
     runs' means, lowest and highest) and its slowest single scan."""
     out: dict = {}
@@ -151,6 +152,10 @@ def summary(rows: list[dict], first: int = 10) -> dict:
             "found_of_moved": f"{sum(r['found'] for r in sel)} of {sum(r['moved'] for r in sel)}",
             "false_relocations": int(sum(r["false_relocations"] for r in sel)),
             "map_correct_fraction": float(np.mean([r["map_correct_fraction"] for r in sel])),
+            # the map's census swings from run to run (0-5 duplicates on one chain): its mean
+            # over the window says more than the last run's count
+            "duplicate_mean": float(np.mean([r["duplicate"] for r in sel])),
+            "stale_mean": float(np.mean([r["stale"] for r in sel])),
         }
     out["stale_why_sum"] = {k: int(sum(r.get(k, 0) for r in rows))
                             for k in ("stale_at_start", "stale_absent", "stale_unseen",

@@ -27,3 +27,24 @@ def test_short_soak_keeps_objects_memory_and_time_bounded(tmp_path):
         assert 0 < r["seen_through_scans"] <= 100  # 10 s at 10 Hz
     # relocations scored per run (time per scan is the benchmark's business, not a test's)
     assert sum(r["false_relocations"] for r in rows) <= 1
+
+
+def test_soak_summary_averages_the_maps_census_over_each_window_of_runs():
+    from benchmarks.bench_soak import summary
+    from gatmo.pipeline.evaluate import CENSUS_KEYS
+
+    def row(run, duplicate, stale):
+        r = dict.fromkeys(("median_err_m", "static_median_err_m", "lost_fraction",
+                           "static_lost_fraction", "map_correct_fraction", "ms_per_scan",
+                           "ms_per_scan_max", "peak_rss_mb"), 0.1)
+        r.update(dict.fromkeys(("found", "moved", "false_relocations", "objects_placed",
+                                "pieces_in_world", "objects_total", *CENSUS_KEYS), 1))
+        r.update(run=run, duplicate=duplicate, stale=stale)
+        return r
+
+    # one chain's swing: the last run's 3 duplicates are one draw of 0-3
+    rows = [row(1, 0, 2), row(2, 1, 4), row(3, 0, 5), row(4, 3, 7)]
+    s = summary(rows, first=2)
+    assert s["runs 1-2"]["duplicate_mean"] == 0.5 and s["runs 1-2"]["stale_mean"] == 3.0
+    assert s["runs 3-4"]["duplicate_mean"] == 1.5 and s["runs 3-4"]["stale_mean"] == 6.0
+    assert s["duplicate"] == [0, 3] and s["stale"] == [2, 7]  # first and last run
