@@ -147,6 +147,7 @@ class GatmoMapper:
         self._ms: list[float] = []
         self._beams = None
         self._sparse_agrees = False  # the last pose test: too few beams, those agreeing
+        self._pose_verified = False  # the scan being laid comes from a confirmed pose
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
         self._view: tuple | None = None  # the scan being tracked (Metaobject.views)
         # what the localizer was last given: the reconfigured map plus, with
@@ -442,6 +443,7 @@ class GatmoMapper:
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
         near_any, explained = self._explained(pts)
+        self._pose_verified = bool(pose_verified)
         fit = self._fits_map(lp, scan, pts, near_any)
         if isinstance(fit, str):
             self.counts[fit] += 1
@@ -1018,12 +1020,26 @@ class GatmoMapper:
             if t >= c.agreement_gone_min_beams and t >= c.agreement_gone_fraction * (t + h):
                 keep &= ~m
                 gone += 1
-        if gone > max(1, c.agreement_gone_max_share * in_view):
+        if (gone > max(1, c.agreement_gone_max_share * in_view)
+                and not self._structure_agrees(own, through, on)):
             # most of the furniture in view gone at once: the pose is wrong (a filter locked
             # onto a look-alike place 3.5 m off agreed on the columns and sent its beams
             # through every piece), not the room; the plain test decides
             keep = ~out
         return int((through & keep).sum() + (on & keep).sum()), int((on & keep).sum())
+
+    def _structure_agrees(self, own: np.ndarray, through: np.ndarray, on: np.ndarray) -> bool:
+        """``agreement_structure_min_beams``: the scan's pose was confirmed by the scan-to-map
+        alignment (``pose_verified``) and enough of the beams the map expects to end on
+        structure end there (per beam: ``own`` its expected owner, ``through``, ``on``). The
+        alignment's own tests (converged, not degenerate, a small correction) keep out a pose
+        slid along walls of one direction, which those walls' beams alone would not."""
+        k = self.cfg.agreement_structure_min_beams
+        if k is None or not self._pose_verified:
+            return False
+        s = own == STRUCTURE
+        t, h = int(through[s].sum()), int(on[s].sum())
+        return h >= k and h >= self.cfg.min_agreement * (t + h)
 
     def _beam_evidence(self, beams) -> set[int]:
         """Beyond Alg. 1, robust to pose errors of a cell or two: the beams the current map says

@@ -1675,3 +1675,48 @@ def test_objects_out_of_the_localizers_map_are_out_of_the_pose_test(agreement, s
         m.update(s.gt_pose_xytheta, s, pose_confident=True, stamp_s=s.stamp_s)
     assert (m.counts["skipped_disagreement"] == 12) == skipped
     assert [o.status for o in pieces] == (["U"] * 3 if skipped else ["A"] * 3)
+
+
+def _two_of_three_gone(structure_min_beams, pose_offset_xytheta=(0.0, 0.0, 0.0),
+                       verified=True):
+    """(mapper, its three pieces sorted by y) after 12 scans facing east of a 7 m x 6 m room
+    (the end wall and the side walls in view) whose map has three pieces in a row and whose
+    world has the middle one only, laid from the true poses plus ``pose_offset_xytheta``,
+    confirmed by an alignment (``verified``) or not."""
+    boxes = [(4.5, 1.2, 5.0, 2.2), (4.5, 2.6, 5.0, 3.4), (4.5, 3.8, 5.0, 4.8)]
+    grid = room_grid(7, 6, 0.05, boxes=boxes)
+    cfg = CFG.model_copy(update={"agreement_structure_min_beams": structure_min_beams})
+    om = ObjectMap.from_grid(grid, cfg)
+    pieces = sorted((o for o in om.objects if not o.structure), key=lambda o: o.pose_xytheta[1])
+    m = GatmoMapper(om, grid, cfg)
+    m.begin_run(1)
+    world = room_grid(7, 6, 0.05, boxes=boxes[1:2])
+    for s in _scans_facing_east(world, fov_rad=np.radians(120)):
+        m.update(s.gt_pose_xytheta + np.asarray(pose_offset_xytheta), s, pose_confident=True,
+                 stamp_s=s.stamp_s, pose_verified=verified)
+    return m, pieces
+
+
+@pytest.mark.parametrize("structure_min_beams, verified, skipped", [
+    (None, True, True), (10, True, False), (10, False, True)])
+def test_two_pieces_gone_in_one_view_are_left_out_of_the_pose_test_where_the_walls_agree(
+        structure_min_beams, verified, skipped):
+    # two of three pieces in view have gone. More than agreement_gone_max_share of the
+    # objects in view seen through at once is what a wrong pose looks like, so the plain test
+    # decides and every scan is skipped; with agreement_structure_min_beams the walls, whose
+    # beams all end where the map has them, vouch for a pose the alignment confirmed, and
+    # the two are absent. A pose only the filter vouches for is skipped as before
+    m, pieces = _two_of_three_gone(structure_min_beams, verified=verified)
+    assert (m.counts["skipped_disagreement"] == 12) == skipped
+    assert [o.status for o in pieces] == (["U"] * 3 if skipped else ["A", "U", "A"])
+
+
+def test_walls_that_disagree_do_not_vouch_for_a_pose_with_two_pieces_gone():
+    # the same view from poses 0.3 m off across the room: the beams on the side walls end
+    # away from the map's walls, so too few of the walls' beams agree and every scan is
+    # skipped; the standing piece stays where it is. (A pose slid along the side walls keeps
+    # their beams on them, and only the end wall's beams leave: that one is for the
+    # scan-to-map alignment to refuse, which is why the walls vouch only for confirmed poses)
+    m, pieces = _two_of_three_gone(10, pose_offset_xytheta=(0.0, 0.3, 0.0))
+    assert m.counts["skipped_disagreement"] == 12
+    assert [o.status for o in pieces] == ["U"] * 3
