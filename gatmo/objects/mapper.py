@@ -147,7 +147,6 @@ class GatmoMapper:
         self._ms: list[float] = []
         self._beams = None
         self._sparse_agrees = False  # the last pose test: too few beams, those agreeing
-        self._pose_verified = False  # the scan being laid comes from a confirmed pose
         self._expected: np.ndarray | None = None  # the map's ranges for the scan's beams
         self._view: tuple | None = None  # the scan being tracked (Metaobject.views)
         # what the localizer was last given: the reconfigured map plus, with
@@ -443,7 +442,6 @@ class GatmoMapper:
         lp = compose(np.asarray(pose_xytheta, dtype=float), scan.laser_pose_xytheta)
         pts = transform_points(lp, scan.points_laser_xy(only_valid=True))
         near_any, explained = self._explained(pts)
-        self._pose_verified = bool(pose_verified)
         fit = self._fits_map(lp, scan, pts, near_any)
         if isinstance(fit, str):
             self.counts[fit] += 1
@@ -1029,13 +1027,13 @@ class GatmoMapper:
         return int((through & keep).sum() + (on & keep).sum()), int((on & keep).sum())
 
     def _structure_agrees(self, own: np.ndarray, through: np.ndarray, on: np.ndarray) -> bool:
-        """``agreement_structure_min_beams``: the scan's pose was confirmed by the scan-to-map
-        alignment (``pose_verified``) and enough of the beams the map expects to end on
-        structure end there (per beam: ``own`` its expected owner, ``through``, ``on``). The
-        alignment's own tests (converged, not degenerate, a small correction) keep out a pose
-        slid along walls of one direction, which those walls' beams alone would not."""
+        """``agreement_structure_min_beams``: enough of the beams the map expects to end on
+        structure end there (per beam: ``own`` its expected owner, ``through``, ``on``). Walls
+        of one direction fit a pose slid along them too: such a pose's scans then feed the
+        tracks, but their rays are evidence of absence only if the scan-to-map alignment,
+        which tests the whole map's edges, confirmed the pose (absence_from_verified_only)."""
         k = self.cfg.agreement_structure_min_beams
-        if k is None or not self._pose_verified:
+        if k is None:
             return False
         s = own == STRUCTURE
         t, h = int(through[s].sum()), int(on[s].sum())

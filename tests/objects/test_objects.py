@@ -1697,18 +1697,20 @@ def _two_of_three_gone(structure_min_beams, pose_offset_xytheta=(0.0, 0.0, 0.0),
     return m, pieces
 
 
-@pytest.mark.parametrize("structure_min_beams, verified, skipped", [
-    (None, True, True), (10, True, False), (10, False, True)])
+@pytest.mark.parametrize("structure_min_beams, verified, skipped, statuses", [
+    (None, True, True, ["U", "U", "U"]), (10, True, False, ["A", "U", "A"]),
+    (10, False, False, ["U", "U", "U"])])
 def test_two_pieces_gone_in_one_view_are_left_out_of_the_pose_test_where_the_walls_agree(
-        structure_min_beams, verified, skipped):
+        structure_min_beams, verified, skipped, statuses):
     # two of three pieces in view have gone. More than agreement_gone_max_share of the
     # objects in view seen through at once is what a wrong pose looks like, so the plain test
     # decides and every scan is skipped; with agreement_structure_min_beams the walls, whose
-    # beams all end where the map has them, vouch for a pose the alignment confirmed, and
-    # the two are absent. A pose only the filter vouches for is skipped as before
+    # beams all end where the map has them, vouch for the pose, and from a pose the alignment
+    # confirmed the two are absent. A pose only the filter vouches for is taken too, but its
+    # rays are no evidence of absence
     m, pieces = _two_of_three_gone(structure_min_beams, verified=verified)
     assert (m.counts["skipped_disagreement"] == 12) == skipped
-    assert [o.status for o in pieces] == (["U"] * 3 if skipped else ["A", "U", "A"])
+    assert [o.status for o in pieces] == statuses
 
 
 def test_walls_that_disagree_do_not_vouch_for_a_pose_with_two_pieces_gone():
@@ -1716,7 +1718,7 @@ def test_walls_that_disagree_do_not_vouch_for_a_pose_with_two_pieces_gone():
     # away from the map's walls, so too few of the walls' beams agree and every scan is
     # skipped; the standing piece stays where it is. (A pose slid along the side walls keeps
     # their beams on them, and only the end wall's beams leave: that one is for the
-    # scan-to-map alignment to refuse, which is why the walls vouch only for confirmed poses)
+    # scan-to-map alignment to refuse before its rays count, as with a single piece gone)
     m, pieces = _two_of_three_gone(10, pose_offset_xytheta=(0.0, 0.3, 0.0))
     assert m.counts["skipped_disagreement"] == 12
     assert [o.status for o in pieces] == ["U"] * 3
