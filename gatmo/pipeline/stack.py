@@ -652,7 +652,8 @@ class LocalizationStack:
         self._last_odom: np.ndarray | None = None
         self._last_precise = False  # the last estimate passed GATMO's strict confidence test
         self._settle_left_m = 0.0
-        self._settle_confirmed = -1  # confirmations since a stack restart (-1: none pending)
+        # confirmations since a stack restart (settle_until_confirmed); None: none pending
+        self._settle_confirmed: int | None = None
         self._injected_seen = 0  # the localizer's random particles counted so far
         # a localizer without the ``withheld`` argument (an older stand-in) gets the masked
         # scan alone
@@ -685,7 +686,7 @@ class LocalizationStack:
         self._last_loc = self._last_odom = None
         self._last_precise = False
         self._settle_left_m = 0.0
-        self._settle_confirmed = -1
+        self._settle_confirmed = None
         self._published_anchor = None
         self._reloc_found = None
         self._reloc_stale = True
@@ -828,7 +829,7 @@ class LocalizationStack:
         if ok:
             self._settle_confirmed += 1
             if self._settle_confirmed >= self.fusion.settle_confirmed_poses:
-                self._settle_left_m, self._settle_confirmed = 0.0, -1
+                self._settle_left_m, self._settle_confirmed = 0.0, None
 
     def _map_aligner(self) -> MapAligner:
         """The scan-to-map alignment on the current map (built on first use; the step hands
@@ -902,13 +903,13 @@ class LocalizationStack:
             jump = relative(compose(self._last_loc, d_odom), loc_pose)
             if np.hypot(jump[0], jump[1]) > self.fusion.max_offset_jump_m:
                 self._settle_left_m = self.fusion.settle_after_jump_m
-                self._settle_confirmed = -1  # the filter jumped by itself: the full wait
+                self._settle_confirmed = None  # the filter jumped by itself: the full wait
         # AMCL's recovery injected random particles: the scans fit the filter's own cloud
         # poorly, so it suspects it is lost, and whatever it settles on next is a guess
         injected = _injected(self.localizer)
         if injected > self._injected_seen:
             self._settle_left_m = self.fusion.settle_after_jump_m
-            self._settle_confirmed = -1
+            self._settle_confirmed = None
         self._injected_seen = injected
         relocalized = False
         # only a confident filter (the paper's reset test) is suspected of being confident and
@@ -978,7 +979,7 @@ class LocalizationStack:
             # scan-to-map alignment below checks every such pose directly
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
-            if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed >= 0
+            if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed is not None
                     and self.fusion.settle_until_confirmed and self.fusion.align_to_map):
                 self._settle_after_restart(pose, scan)
             pose_ok = pose_ok and self._settle_left_m <= 0.0
@@ -987,10 +988,8 @@ class LocalizationStack:
                 self.anchor_gated += 1
             map_pose = pose
             verified = pose_ok
-            if self.fusion.align_to_map:
-                self._map_aligner()
             if pose_ok and self.fusion.align_to_map:
-                map_pose, pose_ok = self._aligner.refine(pose, scan)
+                map_pose, pose_ok = self._map_aligner().refine(pose, scan)
                 verified = self._aligner.last_verified
                 align_outcome = self._aligner.last_outcome
             if pose_ok:
