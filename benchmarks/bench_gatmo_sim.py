@@ -157,7 +157,8 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
                         "refusals": refusals_of(trace.refusals, o.id),
                         "refusals_at_new_place": refusals_near(
                             trace.refused_at, o.id, cur.get(c["id"])),
-                        **piece_evidence(views[0] | views[1], trace, gt)})
+                        **piece_evidence(views[0] | views[1], trace, gt),
+                        **new_place_views(views[1], trace)})
         prev = cur
     return out
 
@@ -177,6 +178,16 @@ def piece_evidence(seen: np.ndarray, trace, gt_xytheta: np.ndarray) -> dict:
             "views_confirmed": int(confirmed.sum()),
             "views_not_converged": int((seen & (trace.align_outcomes == "not_converged")).sum()),
             "confirmed_error_m": round(float(np.median(err)), 4) if len(err) else None}
+
+
+def new_place_views(new: np.ndarray, trace) -> dict:
+    """Of the scans that saw a piece's new place (``new`` (N,) bool, from the true poses), how
+    many there were (``new_views``) and how many GATMO was handed from a trusted pose
+    (``new_views_taken``): the evidence its tracks there could have. Only the filter's
+    updates are handed over, every ``update_min_d_m`` of travel (docs/experiments.md,
+    fifty-second session)."""
+    taken = new & np.isfinite(trace.gatmo_poses_xytheta[:, 0])
+    return {"new_views": int(new.sum()), "new_views_taken": int(taken.sum())}
 
 
 def refusals_of(refusals: dict, object_id: int) -> dict:
@@ -224,17 +235,21 @@ def refusals_by_outcome(outcomes: list[dict]) -> dict:
 
 def evidence_by_outcome(outcomes: list[dict]) -> dict:
     """Over pieces seen at both places, per outcome: how many, the median share of the scans
-    that saw them which GATMO took from a confirmed pose, and the median of their confirmed
-    poses' median error [m]."""
+    that saw them which GATMO took from a confirmed pose, the median of their confirmed
+    poses' median error [m], and the median share of the scans that saw the new place which
+    GATMO was handed (:func:`new_place_views`)."""
     out = {}
     for kind in ("found", "twin", "wrong", "absent", "missed"):
         pieces = [o for o in outcomes if o["observed"] == "both" and o["outcome"] == kind
                   and "views" in o]
         share = [o["views_confirmed"] / o["views"] for o in pieces if o["views"]]
         err = [o["confirmed_error_m"] for o in pieces if o["confirmed_error_m"] is not None]
+        # (outcomes written before the fifty-second session have no new_views)
+        new = [o["new_views_taken"] / o["new_views"] for o in pieces if o.get("new_views")]
         out[kind] = {"pieces": len(pieces),
                      "confirmed_share_median": float(np.median(share)) if share else None,
-                     "confirmed_error_median_m": float(np.median(err)) if err else None}
+                     "confirmed_error_median_m": float(np.median(err)) if err else None,
+                     "new_place_taken_share_median": float(np.median(new)) if new else None}
     return out
 
 

@@ -62,7 +62,7 @@ def test_piece_evidence_counts_the_views_gatmo_took_and_confirmed():
 
     import numpy as np
 
-    from benchmarks.bench_gatmo_sim import evidence_by_outcome, piece_evidence
+    from benchmarks.bench_gatmo_sim import evidence_by_outcome, new_place_views, piece_evidence
 
     gt = np.zeros((6, 3))
     nan = [np.nan] * 3
@@ -78,11 +78,15 @@ def test_piece_evidence_counts_the_views_gatmo_took_and_confirmed():
                   "views_not_converged": 1, "confirmed_error_m": 0.03}
     none = piece_evidence(np.array([True, False, False, False, True, False]), trace, gt)
     assert none["views_confirmed"] == 0 and none["confirmed_error_m"] is None
-    by = evidence_by_outcome([{"observed": "both", "outcome": "missed", **ev},
+    # the new place seen on scans 2-4: two of them handed over, whatever the alignment said
+    new = new_place_views(np.array([False, False, True, True, True, False]), trace)
+    assert new == {"new_views": 3, "new_views_taken": 2}
+    by = evidence_by_outcome([{"observed": "both", "outcome": "missed", **ev, **new},
                               {"observed": "both", "outcome": "missed", **none},
                               {"observed": "old", "outcome": "found", **ev}])
     assert by["missed"] == {"pieces": 2, "confirmed_share_median": 0.125,
-                            "confirmed_error_median_m": 0.03}
+                            "confirmed_error_median_m": 0.03,
+                            "new_place_taken_share_median": pytest.approx(2 / 3)}
     assert by["found"]["pieces"] == 0 and by["found"]["confirmed_share_median"] is None
 
 
