@@ -171,7 +171,7 @@ def piece_evidence(seen: np.ndarray, trace, gt_xytheta: np.ndarray) -> dict:
     alignments did not converge (``views_not_converged``), and the median error [m] of the
     confirmed poses against ``gt_xytheta`` (N, 3) (None without any)."""
     given = trace.gatmo_poses_xytheta
-    taken = seen & np.isfinite(given[:, 0])
+    taken = _handed(seen, trace)
     confirmed = taken & trace.gatmo_verified
     err = np.hypot(*(given[confirmed, :2] - gt_xytheta[confirmed, :2]).T)
     return {"views": int(seen.sum()), "views_taken": int(taken.sum()),
@@ -186,8 +186,12 @@ def new_place_views(new: np.ndarray, trace) -> dict:
     (``new_views_taken``): the evidence its tracks there could have. Only the filter's
     updates are handed over, every ``update_min_d_m`` of travel (docs/experiments.md,
     fifty-second session)."""
-    taken = new & np.isfinite(trace.gatmo_poses_xytheta[:, 0])
-    return {"new_views": int(new.sum()), "new_views_taken": int(taken.sum())}
+    return {"new_views": int(new.sum()), "new_views_taken": int(_handed(new, trace).sum())}
+
+
+def _handed(seen: np.ndarray, trace) -> np.ndarray:
+    """(N,) bool: of the scans ``seen``, those GATMO was handed from a trusted pose."""
+    return seen & np.isfinite(trace.gatmo_poses_xytheta[:, 0])
 
 
 def refusals_of(refusals: dict, object_id: int) -> dict:
