@@ -91,6 +91,7 @@ def one_seed(seed: int, preset: str, runs: int, tmp: Path, seconds: float | None
         "false_relocations": sum(x.get("obj_false_relocations", 0) for x in g),
         "twin_relocations": sum(x.get("obj_twin_relocations", 0) for x in g),
         "false_relocations_carried": sum(x.get("obj_false_relocations_carried", 0) for x in g),
+        "twin_relocations_carried": sum(x.get("obj_twin_relocations_carried", 0) for x in g),
         "false_absences": sum(x.get("obj_false_absences", 0) for x in g),
         "map_correct_last": g[-1].get("obj_map_correct_fraction", float("nan")),
         **{f"last_{k}": v for k, v in census.items()},
@@ -382,6 +383,8 @@ def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
         "twin_relocations_per_run": float(a["twin_relocations"].sum() / (len(rows) * runs)),
         "false_relocations_carried_per_run": float(
             a["false_relocations_carried"].sum() / (len(rows) * runs)),
+        "twin_relocations_carried_per_run": float(
+            a["twin_relocations_carried"].sum() / (len(rows) * runs)),
         "false_absences_per_run": float(a["false_absences"].sum() / (len(rows) * runs)),
         # the same world before anything moved: GATMO's changes per run, all false
         "before_changes_per_run": ({k: float(a[f"before_{k}"].sum() / (len(rows) * runs))

@@ -84,7 +84,10 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     swapped; counted among false_relocations until 2026-11-24); false_relocations_carried:
     of the false ones, those of an object that stood for no piece of its own shape (its own
     or an identical one, in this layout or the run before's) before the event: an earlier
-    error carried on (an object put on another piece following that piece), not a new one.
+    error carried on (an object put on another piece following that piece), not a new one;
+    twin_relocations_carried: of the twin swaps, those of an object that did not stand on its
+    own piece before the event (in this layout or the run before's): a swap made earlier,
+    carried on as the twin piece moves (the map stays right).
     """
     r = scenario["runs"][run - 1]
     layout0 = scenario["map_objects"]
@@ -110,21 +113,24 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
     off = sum(1 for pid in gone if by_id[piece_to_obj[pid]].status == "A"
               or any(e.get("object_id") == piece_to_obj[pid] and e.get("kind") == "relocated"
                      for e in events))
-    false_reloc = twin_reloc = carried = 0
+    false_reloc = twin_reloc = carried = twin_carried = 0
     layout_before = scenario["runs"][run - 2]["objects"] if run > 1 else layout0
     for e in events:
         if e.get("kind") != "relocated" or e.get("object_id") not in ties:
             continue
         o = by_id[e["object_id"]]
         placed = _placed_as(o, ties[o.id], layout0, layout, np.asarray(e["pose_new"], float))
+        before = ([_placed_as(o, ties[o.id], layout0, lay, np.asarray(e["pose_old"], float))
+                   for lay in (layout_before, layout)] if e.get("pose_old") is not None
+                  else None)
         if placed == "twin":
             twin_reloc += 1  # the map is right, an identical piece's identity swapped
+            # it stood on no piece of its own before, or on a twin: a swap made earlier
+            twin_carried += int(before is not None and "right" not in before)
         if placed is not None:
             continue
         false_reloc += 1
-        if e.get("pose_old") is not None and not any(
-                _placed_as(o, ties[o.id], layout0, lay, np.asarray(e["pose_old"], float))
-                for lay in (layout_before, layout)):
+        if before is not None and not any(before):
             carried += 1  # it stood for no piece of its own shape before: an earlier error
     false_abs = 0
     for e in events:
@@ -151,7 +157,7 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
         "placement_error_m": float(np.mean(errors)) if errors else float("nan"),
         "gone": len(gone), "absent_recall": off / len(gone) if gone else float("nan"),
         "false_relocations": false_reloc, "twin_relocations": twin_reloc,
-        "false_relocations_carried": carried,
+        "false_relocations_carried": carried, "twin_relocations_carried": twin_carried,
         "false_absences": false_abs,
         "map_correct_fraction": correct / total if total else float("nan"),
     }

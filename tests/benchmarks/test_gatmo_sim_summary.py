@@ -16,8 +16,8 @@ def _row(seed, gatmo_ate_m, static_ate_m, found, moved, stale_ids, before=None):
            "before_ate_m": b[0], "before_relocated": b[1], "before_absent": b[2],
            "before_added": b[3], "static_lost": 0.2, "gatmo_lost": 0.05,
            "moved": moved, "found": found, "absent_events": 3, "gone": 8, "gone_noticed": 4,
-           "false_relocations": 1, "twin_relocations": 0, "false_absences": 0,
-           "false_relocations_carried": seed - 1,
+           "false_relocations": 1, "twin_relocations": seed, "false_absences": 0,
+           "false_relocations_carried": seed - 1, "twin_relocations_carried": seed - 1,
            **{f"last_{k}": 2 for k in CENSUS_KEYS}, "last_stale_ids": stale_ids,
            "gatmo_ms_per_scan": 20.0, "static_ms_per_scan": 2.0,
            "outcomes": [{"run": 1, "label": "box", "outcome": "found", "observed": "both"}] * found
@@ -36,6 +36,8 @@ def test_totals_over_seeds_leave_the_per_seed_lists_to_the_rows():
     assert t["found_over_moved"] == pytest.approx(0.2)
     assert t["false_relocations_per_run"] == pytest.approx(2 / 8)
     assert t["false_relocations_carried_per_run"] == pytest.approx(1 / 8)
+    assert t["twin_relocations_per_run"] == pytest.approx(3 / 8)
+    assert t["twin_relocations_carried_per_run"] == pytest.approx(1 / 8)
     assert t["found_over_seen_both"] == 1.0 and t["seen_both_over_moved"] == pytest.approx(0.2)
     assert t["table_ii"] == {"box": {"found": 4, "twin": 0, "wrong": 0, "absent": 0, "missed": 0},
                              "desk": {"found": 0, "twin": 0, "wrong": 0, "absent": 0,

@@ -109,6 +109,37 @@ def test_score_run_tells_a_false_relocation_that_carries_an_earlier_error():
         assert (fresh["false_relocations"], fresh["false_relocations_carried"]) == (1, 0)
 
 
+def test_score_run_tells_a_twin_swap_that_carries_an_earlier_one():
+    """Run 2: box 7's object stood on its twin, box 8, after run 1 (a swap made then). Box 8
+    moved from (9, 4) to (9, 6): moving the object along with it is a twin swap carried on;
+    moving it onto box 8 from box 7's own place, in this layout or the run before's, or from
+    a place no box stood, is a new swap or a carried error as the false relocations count."""
+    from gatmo.objects.objectmap import ObjectMap
+    from gatmo.pipeline.evaluate import score_run
+
+    o = _box_object([9.0, 6.0, 0.0])
+    om = ObjectMap([o], 0.05)
+    layout0 = [_piece(7, [2.0, 1.0, 0.0]), _piece(8, [9.0, 1.0, 0.0])]
+    layout1 = [_piece(7, [2.0, 4.0, 0.0]), _piece(8, [9.0, 4.0, 0.0])]
+    layout2 = [_piece(7, [3.0, 5.0, 0.0]), _piece(8, [9.0, 6.0, 0.0])]
+    scen = {"map_objects": layout0,
+            "runs": [{"objects": layout1, "changes": []},
+                     {"objects": layout2, "changes": [{"id": 7, "kind": "moved"},
+                                                      {"id": 8, "kind": "moved"}]}]}
+
+    def twin_counts(old_xy):
+        ev = {"kind": "relocated", "object_id": 1, "pose_old": [*old_xy, 0.0],
+              "pose_new": [9.0, 6.0, 0.0]}
+        r = score_run(om, {1: 7}, scen, 2, [ev])
+        assert r["false_relocations"] == 0
+        return r["twin_relocations"], r["twin_relocations_carried"]
+
+    assert twin_counts((9.0, 4.0)) == (1, 1)  # on the twin before: the old swap, carried
+    assert twin_counts((6.0, 8.0)) == (1, 1)  # on no box before: an earlier error
+    for own_xy in ((3.0, 5.0), (2.0, 4.0)):
+        assert twin_counts(own_xy) == (1, 0)  # from its own piece: a new swap
+
+
 def test_observed_tells_whether_the_old_place_was_seen_through_and_the_new_one_seen():
     # the box stood at (3, 4) and now stands at (5.5, 4); the robot at (1, 4) looks along +x
     old, new = _piece(1, (3.0, 4.0, 0.0)), _piece(1, (5.5, 4.0, 0.0))
