@@ -3,6 +3,8 @@
 Schema (version 1)::
 
     {"format": "gatmo-objects", "version": 1, "resolution_m": 0.05, "next_id": 23,
+     "runs": 4,     # the number of the last run laid on it (optional; else the largest
+                    # run in any history); a run started from this file is run 5
      "base_map": {...},                      # the static map the objects were cut from
      "objects": [{"id": 3, "label": "lounge_chair", "status": "M",
                   "pose": [x, y, yaw],       # p_i: object frame -> map frame
@@ -44,6 +46,7 @@ def save_objects(path: str | Path, object_map: ObjectMap, *, base_grid_meta: dic
         "version": VERSION,
         "resolution_m": object_map.resolution_m,
         "next_id": object_map.next_id,
+        "runs": int(object_map.runs),
         "base_map": base_grid_meta or {},
         "objects": [
             {
@@ -147,6 +150,8 @@ def load_objects(path: str | Path) -> ObjectMap:
                     raise FormatError(f"history entries need a status in {STATUSES}",
                                       file=path, field=hw)
                 h["pose"] = [float(v) for v in _pose(h.get("pose"), path, f"{hw}.pose")]
+                if "run" in h:
+                    _count(h["run"], path, f"{hw}.run")
             o = MapObject(
                 id=oid, label=label, status=status,
                 pose_xytheta=_pose(d["pose"], path, f"{where}.pose"),
@@ -167,4 +172,8 @@ def load_objects(path: str | Path) -> ObjectMap:
         objects.append(o)
     if ids and next_id <= max(ids):
         next_id = max(ids) + 1
-    return ObjectMap(objects, res, next_id)
+    # files written before "runs": the largest run in any history
+    runs = max((h["run"] for o in objects for h in o.history if "run" in h), default=0)
+    if "runs" in doc:
+        runs = max(runs, _count(doc["runs"], path, "runs"))
+    return ObjectMap(objects, res, next_id, runs)

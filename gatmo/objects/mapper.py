@@ -337,7 +337,10 @@ class GatmoMapper:
 
     # ------------------------------------------------------------------ runs
     def begin_run(self, run_id: int) -> None:
+        """Start run ``run_id`` (1-based; the number every event and history entry of the run
+        carries)."""
         self.run = int(run_id)
+        self.object_map.runs = max(self.object_map.runs, self.run)
         self._meta = []
         self._free[:] = 0
         self._passed[:] = 0

@@ -106,9 +106,14 @@ def shape_from_points(points_xy: np.ndarray, resolution_m: float):
 
 @dataclass
 class ObjectMap:
+    """The objects, the resolution of their cells [m], the next free id, and ``runs``: the
+    number of the last run laid on this map (0: none yet), so a run started from a saved map
+    takes the next number."""
+
     objects: list[MapObject]
     resolution_m: float
     next_id: int = 1
+    runs: int = 0
 
     @classmethod
     def from_grid(cls, grid: OccupancyGrid, cfg) -> ObjectMap:

@@ -432,11 +432,13 @@ def run_gatmo(
     initial_pose=None,
     global_localization: bool = False,
     fmt: str | None = None,
-    run_id: int = 1,
+    run_id: int | None = None,
     max_scans: int | None = None,
     progress: Progress | None = None,
 ) -> RunSummary:
-    """``gatmo run``: the full stack on one log; writes poses.tum, objects.json, map, events."""
+    """``gatmo run``: the full stack on one log; writes poses.tum, objects.json, map, events.
+    ``run_id``: the run's number in the object map's history and events; None: the one after
+    the last run laid on ``objects_path`` (1 on a fresh map)."""
     from gatmo.maps.io import load_map
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
@@ -451,6 +453,8 @@ def run_gatmo(
                              cfg.amcl.initial_pose_xytheta)
     if pose0 is not None:
         check_overlap(base, scans[0], pose0, log)
+    if run_id is None:
+        run_id = mapper.object_map.runs + 1
     trace = run_full(cfg, mapper, scans, cfg.seed, pose0, log=str(log), run_id=run_id,
                      progress=progress, total=len(scans))
     write_trace(trace, out)

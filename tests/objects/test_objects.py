@@ -403,9 +403,10 @@ def test_objects_json_round_trip_and_errors(tmp_path):
     om.objects[1].label = "box"
     om.objects[1].pose_xytheta = np.array([3.0, 3.0, 0.5])
     om.objects[1].record(2, 12.5)
+    om.runs = 3  # the third run changed nothing
     save_objects(tmp_path / "o.json", om)
     back = load_objects(tmp_path / "o.json")
-    assert [o.id for o in back.objects] == [o.id for o in om.objects]
+    assert [o.id for o in back.objects] == [o.id for o in om.objects] and back.runs == 3
     for a, b in zip(om.objects, back.objects, strict=True):
         assert a.status == b.status and a.label == b.label and a.history == b.history
         np.testing.assert_allclose(a.pose_xytheta, b.pose_xytheta, atol=1e-6)
@@ -430,6 +431,16 @@ def test_objects_json_round_trip_and_errors(tmp_path):
     with pytest.raises(FormatError) as e:
         load_objects(tmp_path / "bad.json")
     assert e.value.field == "objects[0].pose"
+    # a file written before "runs" was: the largest run in any history
+    doc = json.loads((tmp_path / "o.json").read_text())
+    del doc["runs"]
+    (tmp_path / "old.json").write_text(json.dumps(doc))
+    assert load_objects(tmp_path / "old.json").runs == 2
+    doc["objects"][1]["history"][0]["run"] = -1
+    (tmp_path / "run.json").write_text(json.dumps(doc))
+    with pytest.raises(FormatError) as e:
+        load_objects(tmp_path / "run.json")
+    assert e.value.field == "objects[1].history[0].run"
     # history poses are read (priors for matching), so they are checked too
     doc = json.loads((tmp_path / "o.json").read_text())
     doc["objects"][1]["history"][0]["pose"] = [1.0, "x", 0.0]

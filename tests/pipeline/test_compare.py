@@ -49,9 +49,12 @@ def test_run_writes_poses_objects_map_events_and_continues_from_objects(scen, tm
     out2 = tmp_path / "r2"
     assert main(["run", "--map", str(scen.map_yaml), "--log", str(scen.logs[1]),
                  "--objects", str(out1 / "objects.json"), "--out", str(out2)]) == 0
-    before = {o.id for o in load_objects(out1 / "objects.json").objects}
-    after = {o.id for o in load_objects(out2 / "objects.json").objects}
-    assert before <= after  # identities carried over
+    first, second = load_objects(out1 / "objects.json"), load_objects(out2 / "objects.json")
+    assert {o.id for o in first.objects} <= {o.id for o in second.objects}  # identities kept
+    # the run started from the first run's objects is run 2, in the file and in its events
+    assert (first.runs, second.runs) == (1, 2)
+    events = [json.loads(line) for line in (out2 / "events.jsonl").read_text().splitlines()]
+    assert all(e["run"] == 2 for e in events)
 
 
 def test_unreadable_log_in_the_middle_keeps_earlier_results(scen, tmp_path, capsys):
