@@ -8,7 +8,10 @@ changes and matches are the same kind as in a fresh map). The peer is the same r
 added (N = 0), timed in the same process.
 
     python -m benchmarks.bench_gatmo_scaling [--absent 0,100,300,1000] [--seed 400]
-        [--seconds 60] [--tag NAME]
+        [--seconds 60] [--run 1] [--set KEY=VALUE ...] [--tag NAME]
+
+``--run K``: the timed run is run K of the object map's life, the added objects absent since
+run 0 (with ``--set gatmo.absent_candidate_runs=N`` and K > N, absent too long to be tried).
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ def with_absent(mapper, n: int, rng: np.random.Generator) -> None:
         om.next_id += 1
 
 
-def one(n_absent: int, scans, base, cfg, seed: int) -> dict:
+def one(n_absent: int, scans, base, cfg, seed: int, run: int = 1) -> dict:
     """The full stack on ``scans`` from a fresh object map of ``base`` with ``n_absent``
     absent objects added: its ms per scan (mean, 95th percentile, max) and GATMO's events."""
     from gatmo.objects.mapper import GatmoMapper
@@ -52,7 +55,7 @@ def one(n_absent: int, scans, base, cfg, seed: int) -> dict:
     mapper = GatmoMapper.from_config(cfg.gatmo, base)
     with_absent(mapper, n_absent, np.random.default_rng(seed))
     stack = make_full_stack(cfg, mapper, 0, scans[0].gt_pose_xytheta)
-    stack.begin_run(1)
+    stack.begin_run(run)
     ms, kinds = [], {}
     for s in scans:
         t0 = time.perf_counter()
@@ -67,6 +70,7 @@ def one(n_absent: int, scans, base, cfg, seed: int) -> dict:
 
 
 def main(argv=None) -> int:
+    from benchmarks._overrides import add_override_args, with_overrides
     from gatmo.datasets.carmen import CarmenLog
     from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.maps.io import load_map
@@ -77,7 +81,8 @@ def main(argv=None) -> int:
                     help="absent objects added, comma-separated (0 is the peer)")
     ap.add_argument("--seed", type=int, default=400)
     ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--tag", default="")
+    ap.add_argument("--run", type=int, default=1, help="the timed run's number")
+    add_override_args(ap)
     args = ap.parse_args(argv)
     counts = [int(x) for x in args.absent.split(",")]
     sim = SimConfig.for_preset("hall")
@@ -85,9 +90,9 @@ def main(argv=None) -> int:
     scen = simulate_scenario(Path(tempfile.mkdtemp()) / "s", runs=1, seed=args.seed, config=sim)
     scans = list(CarmenLog(scen.logs[0]))
     base = load_map(scen.map_yaml)
-    cfg = sim_stack_config()
+    cfg = with_overrides(sim_stack_config(), args.set)
     one(0, scans[:20], base, cfg, args.seed)  # numba loads its kernels from the cache
-    rows = [one(n, scans, base, cfg, args.seed) for n in counts]
+    rows = [one(n, scans, base, cfg, args.seed, args.run) for n in counts]
     peer = next((r["ms_per_scan"] for r in rows if r["absent_added"] == 0), None)
     print(f"hall seed {args.seed}, {len(scans)} scans of {1e3 * args.seconds / len(scans):.0f}"
           " ms")
@@ -99,8 +104,8 @@ def main(argv=None) -> int:
               f"{r['ms_max']:.0f} | {r['events']}")
     OUT.mkdir(exist_ok=True)
     path = OUT / f"gatmo_scaling{args.tag}.json"
-    path.write_text(json.dumps({"seed": args.seed, "scans": len(scans), "rows": rows},
-                               indent=1))
+    path.write_text(json.dumps({"seed": args.seed, "scans": len(scans), "run": args.run,
+                                "overrides": args.set, "rows": rows}, indent=1))
     print(f"wrote {path}")
     return 0
 

@@ -213,6 +213,15 @@ class GatmoConfig(GatmoModel):
         "re-measured with them (twenty-second session, tuning seeds 300-319): false "
         "relocations 1.15 -> 0.85 per seed, found 18.1 % -> 14.8 %, ATE 0.150 -> 0.285 m")
     match_patience_scans: int = Field(30, ge=1, description="after this, match despite doubt")
+    absent_candidate_runs: int | None = Field(
+        10, ge=1, description="beyond the paper, for a long life: an object absent for more "
+        "than this many runs is no longer a candidate (nor a rival) for the chairs GATMO "
+        "tracks; it stays in objects.json with its history. Every absent object is matched "
+        "against every chair tracked, so without a bound the time per scan grows with the "
+        "absences a robot's life piles up: 1000 absent objects made a hall run 8x slower, "
+        "one scan 5.5 s (benchmarks/bench_gatmo_scaling.py, fifty-third session); the 50-run "
+        "soak's figures stayed within its chains' spread. None: every absent object stays a "
+        "candidate, as in the paper")
     match_unseen_movable: bool = Field(
         False, description="the paper's matching of chairs with movable objects whose place "
         "was not seen this run (after match_patience_scans); off: a piece not visited yet is "

@@ -1225,7 +1225,8 @@ class GatmoMapper:
             if o.structure:
                 continue
             if o.status == "A":
-                out.append((0, o))
+                if not self._absent_too_long(o):
+                    out.append((0, o))
                 continue
             if o.status not in ("U", "M"):
                 continue
@@ -1241,6 +1242,15 @@ class GatmoMapper:
                 if np.any(np.hypot(*(q[:, :2] - c).T) < self.cfg.doubt_search_m + o.extent_m()):
                     out.append((-2, o))
         return out
+
+    def _absent_too_long(self, o: MapObject) -> bool:
+        """With ``absent_candidate_runs``: ``o`` has been absent for more runs than that (since
+        the last entry of its history marking it absent), so no chair is tried as it."""
+        k = self.cfg.absent_candidate_runs
+        if k is None or o.status != "A":
+            return False
+        since = next((h["run"] for h in reversed(o.history) if h.get("status") == "A"), 0)
+        return self.run - since > k
 
     def _at_earlier_pose(self, o: MapObject, pose_xytheta: np.ndarray) -> bool:
         """The object at ``pose_xytheta`` stands where it stood before (within
@@ -1390,7 +1400,7 @@ class GatmoMapper:
             # (an object is no rival of itself: lookalike() says nothing of specks too small
             # to call a shape, not even that one looks like itself)
             if (r is o or r.structure or r.status not in ("U", "M", "A") or not self._distinctive(r)
-                    or self._confirmed(r)
+                    or self._confirmed(r) or self._absent_too_long(r)
                     or any(lookalike(r, q, self.cfg.lookalike_tolerance) for q in shapes)):
                 continue
             shapes.append(r)

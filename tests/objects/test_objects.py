@@ -1733,3 +1733,23 @@ def test_walls_that_disagree_do_not_vouch_for_a_pose_with_two_pieces_gone():
     m, pieces = _two_of_three_gone(10, pose_offset_xytheta=(0.0, 0.3, 0.0))
     assert m.counts["skipped_disagreement"] == 12
     assert [o.status for o in pieces] == ["U"] * 3
+
+
+@pytest.mark.parametrize("run, relocated", [(5, True), (13, False)])
+def test_an_object_absent_for_many_runs_is_no_candidate_with_absent_candidate_runs(run,
+                                                                                    relocated):
+    # a box marked absent in run 1 is seen 4 m from its old place: in run 5 the chair there is
+    # matched to it as always; in run 13, absent for more than absent_candidate_runs (10),
+    # it is no longer tried, and the chair joins the map as a new object
+    m, box, world = _one_object((10, 6), (1.0, 2.5, 1.5, 3.0), [(5.0, 2.5, 5.5, 3.0)])
+    assert m.cfg.absent_candidate_runs == 10  # the default
+    box.status = "A"
+    box.record(1, 0.0)
+    m.end_run()
+    m.begin_run(run)
+    events = _drive(m, world, [(3.5, 1.5, 0.5)] * 12 + [(3.5, 4.0, -0.5)] * 12,
+                    max_range_m=6.0)
+    events += m.end_run()
+    kinds = [e.kind for e in events if e.kind != "gamma"]
+    assert kinds == (["relocated"] if relocated else ["added"])
+    assert (box.status == "M") == relocated
