@@ -70,6 +70,29 @@ def save_objects(path: str | Path, object_map: ObjectMap, *, base_grid_meta: dic
     return atomic_write_text(path, json.dumps(doc, separators=(",", ":")))
 
 
+def _check_base_map(meta, grid, path: Path) -> None:
+    """Refuse an object map made on another map than ``grid``: ``meta`` is the file's
+    ``base_map`` (resolution_m, origin_xytheta, shape [rows, columns]); a file without it (or
+    with an empty one) is taken as it is."""
+    if not meta:
+        return
+    if not isinstance(meta, dict):
+        raise FormatError("base_map must be an object", file=path, field="base_map")
+    here = {"resolution_m": grid.resolution_m, "origin_xytheta": list(grid.origin_xytheta),
+            "shape": [grid.height, grid.width]}
+    for key, value in here.items():
+        if key not in meta:
+            continue
+        try:
+            same = np.allclose(np.asarray(meta[key], dtype=float), value, rtol=0, atol=1e-6)
+        except (TypeError, ValueError):
+            raise FormatError(f"bad value {meta[key]!r}", file=path,
+                              field=f"base_map.{key}") from None
+        if not same:
+            raise FormatError(f"made on another map: {key} {meta[key]} there, {value} in the "
+                              "map given", file=path, field=f"base_map.{key}")
+
+
 def _pose(v, path, where) -> np.ndarray:
     try:
         a = np.asarray(v, dtype=float) if isinstance(v, list) else None
@@ -97,8 +120,11 @@ def _points(v, path, where) -> np.ndarray:
     return a
 
 
-def load_objects(path: str | Path) -> ObjectMap:
-    """Read objects.json; any schema problem is a FormatError naming the JSON path."""
+def load_objects(path: str | Path, grid=None) -> ObjectMap:
+    """Read objects.json; any schema problem is a FormatError naming the JSON path. With
+    ``grid`` (an OccupancyGrid, the static map a run is given), a file whose ``base_map`` records
+    another map (resolution, origin or size) is refused: its objects' poses and cells are in
+    that map's frame."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text())
@@ -119,6 +145,8 @@ def load_objects(path: str | Path) -> ObjectMap:
         raise FormatError(f"missing or bad top-level field: {exc}", file=path) from None
     if not isinstance(items, list) or not (res > 0):
         raise FormatError("bad objects list or resolution", file=path, field="objects")
+    if grid is not None:
+        _check_base_map(doc.get("base_map"), grid, path)
     objects, ids = [], set()
     for i, d in enumerate(items):
         where = f"objects[{i}]"

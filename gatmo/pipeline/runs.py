@@ -407,7 +407,7 @@ def _make_mapper(cfg, grid: OccupancyGrid, objects_path: Path | None):
     if objects_path is not None:
         from gatmo.maps.object_io import load_objects
 
-        object_map = load_objects(objects_path)
+        object_map = load_objects(objects_path, grid)
     return GatmoMapper.from_config(cfg.gatmo, grid, object_map=object_map)
 
 

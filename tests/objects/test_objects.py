@@ -431,6 +431,15 @@ def test_objects_json_round_trip_and_errors(tmp_path):
     with pytest.raises(FormatError) as e:
         load_objects(tmp_path / "bad.json")
     assert e.value.field == "objects[0].pose"
+    # a file records the map it was made on, and is refused with another one
+    meta = {"resolution_m": 0.05, "origin_xytheta": list(g.origin_xytheta),
+            "shape": [g.height, g.width]}
+    save_objects(tmp_path / "m.json", om, base_grid_meta=meta)
+    assert len(load_objects(tmp_path / "m.json", g).objects) == len(om.objects)
+    for other, field in ((room_grid(9, 6, 0.05), "shape"), (room_grid(8, 6, 0.1), "resolution_m")):
+        with pytest.raises(FormatError) as e:
+            load_objects(tmp_path / "m.json", other)
+        assert e.value.field == f"base_map.{field}"
     # a file written before "runs" was: the largest run in any history
     doc = json.loads((tmp_path / "o.json").read_text())
     del doc["runs"]

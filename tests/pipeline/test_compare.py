@@ -57,6 +57,25 @@ def test_run_writes_poses_objects_map_events_and_continues_from_objects(scen, tm
     assert all(e["run"] == 2 for e in events)
 
 
+def test_objects_made_on_another_map_are_refused(scen, tmp_path, capsys):
+    # an objects.json records the map it was made on; given with another map (here the same
+    # map padded by a column), its poses and cells would be in the wrong frame
+    from gatmo.maps.io import save_map
+
+    out1 = tmp_path / "r1"
+    assert main(["run", "--map", str(scen.map_yaml), "--log", str(scen.logs[0]),
+                 "--out", str(out1), "--max-scans", "5"]) == 0
+    grid = load_map(scen.map_yaml)
+    grid.cells = np.pad(grid.cells, ((0, 0), (0, 1)), constant_values=-1)
+    other = tmp_path / "other.yaml"
+    save_map(grid, other)
+    rc = main(["run", "--map", str(other), "--log", str(scen.logs[1]), "--objects",
+               str(out1 / "objects.json"), "--out", str(tmp_path / "r2"), "--max-scans", "5"])
+    err = capsys.readouterr().err
+    assert rc == 1 and "objects.json" in err and "base_map.shape" in err
+    assert "Traceback" not in err
+
+
 def test_unreadable_log_in_the_middle_keeps_earlier_results(scen, tmp_path, capsys):
     bad = tmp_path / "broken.clf"
     bad.write_text("FLASER 3 1.0 2.0\n")
