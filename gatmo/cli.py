@@ -121,11 +121,13 @@ def _print_mapping(title: str, rows: dict) -> None:
 @app.command()
 def info(
     file: Annotated[
-        Path, typer.Argument(help="Log, bag, map YAML, wean.dat, TUM or relations.")
+        Path, typer.Argument(help="Log, bag, map YAML, wean.dat, TUM, relations or "
+                             "objects.json.")
     ],
     fmt: FormatOpt = None,
 ) -> None:
-    """Summarise a data file: sensor, beams, FOV, range, scans, duration, path, topics."""
+    """Summarise a data file: sensor, beams, FOV, range, scans, duration, path, topics; an
+    object map's objects by list and runs."""
     from gatmo.datasets.info import summarize
 
     summary = summarize(file, fmt=fmt)

@@ -22,10 +22,28 @@ def _grid_summary(grid) -> dict:
     }
 
 
+def _objects_summary(path: Path) -> dict:
+    from gatmo.maps.object_io import load_objects
+
+    om = load_objects(path)
+    pieces = [o for o in om.objects if not o.structure]
+    out = {"kind": "object map", "runs": om.runs, "objects": len(pieces),
+           "walls_and_structure": len(om.objects) - len(pieces)}
+    for status, name in (("U", "unclassified"), ("M", "movable_placed"), ("A", "absent"),
+                         ("Gamma", "seen_never_added")):
+        out[name] = sum(o.status == status for o in pieces)
+    out["moved_at_least_once"] = sum(o.moved_count > 0 for o in pieces)
+    out["pose_history_entries"] = sum(len(o.history) for o in om.objects)
+    return out
+
+
 def summarize(path: str | Path, fmt: str | None = None) -> dict:
-    """A dict describing a log, bag, map YAML, wean.dat, TUM or relations file."""
+    """A dict describing a log, bag, map YAML, wean.dat, TUM, relations or objects.json
+    file."""
     p = Path(path)
     name = p.name
+    if name.endswith(".json"):
+        return _objects_summary(p)
     if name.endswith((".yaml", ".yml")):
         from gatmo.maps.io import load_map
 

@@ -431,6 +431,14 @@ def test_objects_json_round_trip_and_errors(tmp_path):
     with pytest.raises(FormatError) as e:
         load_objects(tmp_path / "bad.json")
     assert e.value.field == "objects[0].pose"
+    # gatmo info summarizes it
+    from gatmo.datasets.info import summarize
+
+    s = summarize(tmp_path / "o.json")
+    assert (s["kind"], s["runs"], s["objects"], s["walls_and_structure"]) == (
+        "object map", 3, 2, 1)
+    assert (s["unclassified"], s["movable_placed"], s["absent"]) == (1, 1, 0)
+    assert s["pose_history_entries"] == 1
     # a file records the map it was made on, and is refused with another one
     meta = {"resolution_m": 0.05, "origin_xytheta": list(g.origin_xytheta),
             "shape": [g.height, g.width]}
