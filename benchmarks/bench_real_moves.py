@@ -1,5 +1,5 @@
 """GATMO on real logs with furniture moved in the map (issue 5 on real data;
-``gatmo.pipeline.rearrange``): pieces of the log's own map are erased where they stand and drawn
+``gatmo.pipeline.map_moves``): pieces of the log's own map are erased where they stand and drawn
 turned and shifted in free space the robot saw through; ``gatmo compare`` then runs the unchanged
 log on that map. Every move's truth is exact: the place the log shows the piece at.
 
@@ -42,6 +42,21 @@ def _events_of(run_dir: Path, object_ids) -> dict[int, dict]:
     return out
 
 
+def _refused_near(trace, object_id: int, true_pose, within_m: float = 0.6) -> dict[str, int]:
+    """Why the object was not put on its true place: per matching test, how many times it
+    refused a chair centred within ``within_m`` of the true pose (of the places the run
+    recorded for that test; ``GatmoMapper.refused_at`` keeps each place once), and in all."""
+    out = {}
+    for (oid, test), places in trace.refused_at.items():
+        if oid != object_id:
+            continue
+        near = [p for p in places if np.hypot(p[0] - true_pose[0], p[1] - true_pose[1])
+                <= within_m]
+        if near:
+            out[test] = len(near)
+    return out
+
+
 def _run_dir(cmp_dir: Path, bag: Path) -> Path:
     return cmp_dir / "gatmo" / f"01_{bag.stem.split('.')[0]}"
 
@@ -50,7 +65,7 @@ def one_log(name: str, key: str, args, cfg) -> dict:
     from gatmo.maps.io import load_map, save_map
     from gatmo.maps.object_io import load_objects
     from gatmo.objects.objectmap import ObjectMap
-    from gatmo.pipeline.rearrange import apply_moves, pick_moves, score_moves, tie_moves
+    from gatmo.pipeline.map_moves import apply_moves, pick_moves, score_moves, tie_moves
     from gatmo.pipeline.runs import compare
 
     cache = OUT.parent / "real_compare" / name
@@ -89,7 +104,9 @@ def one_log(name: str, key: str, args, cfg) -> dict:
         edited_yaml = tdir / "map.yaml"
         tdir.mkdir(parents=True, exist_ok=True)
         save_map(edited, edited_yaml)
-        cmp = compare(edited_yaml, [bag], tdir / "cmp", pictures=trial == 0, **common)
+        cmp = compare(edited_yaml, [bag], tdir / "cmp", pictures=trial == 0, keep_traces=True,
+                      **common)
+        trace = cmp.traces[(0, "gatmo")]
         rows = {r["side"]: r for r in cmp.rows if r.get("log") != "all"}
         ties = tie_moves(ObjectMap.from_grid(edited, cfg.gatmo), grid, moves)
         final = load_objects(_run_dir(tdir / "cmp", bag) / "objects.json")
@@ -100,6 +117,8 @@ def one_log(name: str, key: str, args, cfg) -> dict:
             pm["extent_m"] = float(np.ptp(moves[pm["move"]].cells_xy, axis=0).max())
             pm["absent_scan"] = ev[pm["object_id"]].get("absent")
             pm["relocated_scan"] = ev[pm["object_id"]].get("relocated")
+            pm["refused_near_truth"] = _refused_near(trace, pm["object_id"],
+                                                     ties[pm["object_id"]]["true_pose"])
         t = {"trial": trial, "moves": len(moves), **{k: sc[k] for k in OUTCOMES + FALSE},
              "added_on_moved": sc["added_on_moved"], "per_move": sc["per_move"],
              "static_ate_rmse_m": rows["static"]["ate_rmse_m"],

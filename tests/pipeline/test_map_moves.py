@@ -1,4 +1,4 @@
-"""Furniture moved in a recorded map (gatmo.pipeline.rearrange): the edit, its truth, and GATMO
+"""Furniture moved in a recorded map (gatmo.pipeline.map_moves): the edit, its truth, and GATMO
 finding the piece where the log shows it."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from gatmo.maps.grid import FREE, OCCUPIED
 from gatmo.objects import GatmoConfig, GatmoMapper, ObjectMap
 from gatmo.pipeline.evaluate import placement_error
-from gatmo.pipeline.rearrange import (
+from gatmo.pipeline.map_moves import (
     MapMove,
     apply_moves,
     moved_cells,
