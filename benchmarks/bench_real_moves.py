@@ -5,7 +5,7 @@ log on that map. Every move's truth is exact: the place the log shows the piece 
 
     python -m benchmarks.bench_real_moves [--logs intel,mit-csail,aces] [--trials 3]
                                           [--moves 4] [--seed 0] [--max-scans N]
-                                          [--demo-config] [--set KEY=VALUE ...] [--tag NAME]
+                                          [--flat-model] [--set KEY=VALUE ...] [--tag NAME]
 
 Per log, in the same process: the full stack on the unedited map (the peer: its ATE is the one
 before anything moved, and what GATMO changes there is its baseline of false events), then per
@@ -171,9 +171,10 @@ def main(argv=None) -> int:
     ap.add_argument("--every", type=int, default=3,
                     help="every this many reference scans tested for views")
     ap.add_argument("--max-scans", type=int, default=None)
-    ap.add_argument("--demo-config", action="store_true",
-                    help="the demo's likelihood_field_prob (sigma_hit 0.1 m), as "
-                    "bench_real_compare --demo-config")
+    ap.add_argument("--flat-model", action="store_true",
+                    help="AMCL's default likelihood field (sigma_hit 0.2 m) instead of the "
+                    "demo's likelihood_field_prob (bench_real_compare --demo-config): with it the "
+                    "filter is seldom confident enough for GATMO to act (README, Real logs)")
     add_override_args(ap)
     args = ap.parse_args(argv or [])
     if not (DATA / "slam-benchmark").exists():
@@ -186,8 +187,8 @@ def main(argv=None) -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     fig_path = OUT / "figures.json"
     for name in names:
-        cfg = with_overrides(real_log_config(demo_model=args.demo_config), args.set)
-        key = (f"{name}-demo" if args.demo_config else name) + args.tag
+        cfg = with_overrides(real_log_config(demo_model=not args.flat_model), args.set)
+        key = f"{name}-{'flat' if args.flat_model else 'demo'}{args.tag}"
         res = one_log(name, key, args, cfg)
         res["command"] = "python -m benchmarks.bench_real_moves " + " ".join(argv or [])
         # read again just before writing: another log's run may have written meanwhile

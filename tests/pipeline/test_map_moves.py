@@ -150,7 +150,7 @@ DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
                     reason="../shared/data (the Intel log and its corrected poses) not found")
 def test_real_intel_a_piece_moved_in_the_map_is_found_where_the_log_shows_it(tmp_path):
     # the Intel lab's map (rendered from the corrected log) with a 0.6 m piece moved 2.46 m
-    # and turned 10.6 deg, as trial 0 of `bench_real_moves --logs intel --demo-config` drew
+    # and turned 10.6 deg, as trial 0 of `bench_real_moves --logs intel` drew
     # it; the bag's first 700 scans pass both places
     from benchmarks.bench_real_compare import real_log_config
     from gatmo.maps.io import load_map
