@@ -43,9 +43,9 @@ def _events_of(run_dir: Path, object_ids) -> dict[int, dict]:
 
 
 def _refused_near(trace, object_id: int, true_pose, within_m: float = 0.6) -> dict[str, int]:
-    """Why the object was not put on its true place: per matching test, how many times it
-    refused a chair centred within ``within_m`` of the true pose (of the places the run
-    recorded for that test; ``GatmoMapper.refused_at`` keeps each place once), and in all."""
+    """Why the object was not put on its true place: per matching test, at how many places
+    within ``within_m`` of the true pose it refused a chair (``GatmoMapper.refused_at`` keeps
+    each refused chair's centre once, to 0.1 m)."""
     out = {}
     for (oid, test), places in trace.refused_at.items():
         if oid != object_id:
@@ -93,7 +93,7 @@ def one_log(name: str, key: str, args, cfg) -> dict:
     res = {"log": name, "scans": len(scans), "before_ate_rmse_m": peer_row["ate_rmse_m"],
            "before_lost_fraction": peer_row["lost_fraction"],
            "before": {k: peer_score[k] for k in FALSE}, "trials": []}
-    print(name, "unedited map:", {k: res[k] for k in ("before_ate_rmse_m",)}, res["before"],
+    print(name, "unedited map: ATE", round(res["before_ate_rmse_m"], 3), res["before"],
           flush=True)
     for trial in range(args.trials):
         rng = np.random.default_rng(args.seed + trial)
