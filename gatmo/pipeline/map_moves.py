@@ -84,10 +84,13 @@ def moved_cells(grid: OccupancyGrid, move: MapMove) -> np.ndarray:
     thickened such an outline by half (a 14-cell speck came out at 21 cells, this at 18):
     here the median piece gains 13 % of its cells."""
     src = grid.world_to_cell(move.cells_xy)
-    have = {tuple(c) for c in src}
+    # the piece's cells in a window one cell wider on each side, so every neighbour indexes it
+    at = src - src.min(axis=0) + 1
+    have = np.zeros(tuple(at.max(axis=0) + 2)[::-1], dtype=bool)
+    have[at[:, 1], at[:, 0]] = True
     pts = [move.cells_xy]
     for d in ((1, 0), (0, 1), (1, 1), (1, -1)):
-        ok = np.array([(c[0] + d[0], c[1] + d[1]) in have for c in src])
+        ok = have[at[:, 1] + d[1], at[:, 0] + d[0]]
         pts.append(move.cells_xy[ok] + 0.5 * grid.resolution_m * np.array(d))
     return np.unique(grid.world_to_cell(move.moved(np.vstack(pts))), axis=0)
 
@@ -106,15 +109,35 @@ def apply_moves(grid: OccupancyGrid, moves: list[MapMove]) -> OccupancyGrid:
     return out
 
 
-def standing_views(grid: OccupancyGrid, object_map: ObjectMap, scans,
-                   near_m: float = 0.1, min_returns: int = 5) -> dict[int, int]:
-    """Object id -> how many of ``scans`` (from their ``gt_pose_xytheta``) put at least
-    ``min_returns`` returns within ``near_m`` of its cells: the piece stood there, in view."""
+def _owners(grid: OccupancyGrid, object_map: ObjectMap) -> np.ndarray:
+    """(H, W) the id of the object on each cell at its current pose, 0 where none."""
     label = np.zeros(grid.cells.shape, dtype=np.int64)
     for o in object_map.objects:
         c = grid.world_to_cell(o.cells_world())
         c = c[grid.in_bounds(c)]
         label[c[:, 1], c[:, 0]] = o.id
+    return label
+
+
+def _clear_of_others(occupied: np.ndarray, cells: np.ndarray, clearance_m: float,
+                     resolution_m: float) -> bool:
+    """Every other occupied cell lies at least ``clearance_m`` from ``cells`` (K, 2) (ix, iy),
+    looked for in a window that much wider around them."""
+    r = int(np.ceil(clearance_m / resolution_m))
+    y0, x0 = max(cells[:, 1].min() - r, 0), max(cells[:, 0].min() - r, 0)
+    win = occupied[y0:cells[:, 1].max() + r + 1, x0:cells[:, 0].max() + r + 1].copy()
+    win[cells[:, 1] - y0, cells[:, 0] - x0] = False
+    if not win.any():
+        return True
+    d = ndimage.distance_transform_edt(~win) * resolution_m
+    return bool(d[cells[:, 1] - y0, cells[:, 0] - x0].min() >= clearance_m)
+
+
+def standing_views(grid: OccupancyGrid, object_map: ObjectMap, scans,
+                   near_m: float = 0.1, min_returns: int = 5) -> dict[int, int]:
+    """Object id -> how many of ``scans`` (from their ``gt_pose_xytheta``) put at least
+    ``min_returns`` returns within ``near_m`` of its cells: the piece stood there, in view."""
+    label = _owners(grid, object_map)
     # a return within near_m of a cell: the labels grown by that many cells (where two
     # grown labels meet, the larger id takes the cell: only pieces near others lose a view)
     grow = max(1, int(np.ceil(near_m / grid.resolution_m)))
@@ -171,7 +194,6 @@ def pick_moves(
     res = grid.resolution_m
     views = standing_views(grid, object_map, scans)
     occ = grid.occupied
-    r = int(np.ceil(clearance_m / res))
     # distance [m] of every cell to the nearest occupied one
     dist_occ = ndimage.distance_transform_edt(~occ) * res
     poses = np.array([s.gt_pose_xytheta for s in scans], dtype=float)
@@ -185,17 +207,8 @@ def pick_moves(
         if views.get(o.id, 0) < min_views:
             continue
         c = grid.world_to_cell(o.cells_world())
-        if not grid.in_bounds(c).all():
-            continue
-        # the other occupied cells in a window around it, and their distance to its cells
-        y0, x0 = max(c[:, 1].min() - r, 0), max(c[:, 0].min() - r, 0)
-        win = occ[y0:c[:, 1].max() + r + 1, x0:c[:, 0].max() + r + 1].copy()
-        win[c[:, 1] - y0, c[:, 0] - x0] = False
-        if win.any():
-            d = ndimage.distance_transform_edt(~win) * res
-            if d[c[:, 1] - y0, c[:, 0] - x0].min() < clearance_m:
-                continue
-        candidates.append(o)
+        if grid.in_bounds(c).all() and _clear_of_others(occ, c, clearance_m, res):
+            candidates.append(o)
     order = rng.permutation(len(candidates))
     moves: list[MapMove] = []
     placed = np.zeros((0, 2))
@@ -237,18 +250,16 @@ def tie_moves(edited: ObjectMap, grid: OccupancyGrid, moves: list[MapMove]) -> d
     """Object id in ``edited`` (the object map of the edited grid) -> {"move": the move's
     index, "true_pose": (3,) where its frame must go}: the object covering most of a move's
     new cells (at least half of them)."""
+    owner = _owners(grid, edited)  # an edited map's objects stand where the map has them
+    by_id = edited.by_id
     out: dict[int, dict] = {}
     for k, m in enumerate(moves):
-        new = {tuple(c) for c in moved_cells(grid, m)}
-        best, best_n = None, 0
-        for o in edited.objects:
-            if o.base_pose_xytheta is None:
-                continue
-            c = grid.world_to_cell(o.cells_world(o.base_pose_xytheta))
-            n = sum(tuple(v) in new for v in c)
-            if n > best_n:
-                best, best_n = o, n
-        if best is not None and best_n >= 0.5 * len(new):
+        new = moved_cells(grid, m)
+        on = new[grid.in_bounds(new)]
+        ids, n = np.unique(owner[on[:, 1], on[:, 0]], return_counts=True)
+        n[ids == 0] = 0
+        if len(ids) and n.max() >= 0.5 * len(new):
+            best = by_id[int(ids[np.argmax(n)])]
             out[best.id] = {"move": k, "true_pose": m.true_pose(best.base_pose_xytheta)}
     return out
 
