@@ -139,7 +139,12 @@ def _totals(res: dict) -> dict:
     tot = {k: sum(t[k] for t in ts) for k in OUTCOMES + FALSE + ("added_on_moved",)}
     noticed = [pm for t in ts for pm in t["per_move"] if pm["absent_scan"] is not None]
     found = [pm for t in ts for pm in t["per_move"] if pm["outcome"] == "found"]
-    return {"moves": moves, **tot,
+    # put elsewhere by the absence's own match (a chair or a Gamma object seen before it):
+    # no track at the true place had a chance, and once placed the object is no candidate
+    at_absence = [pm for t in ts for pm in t["per_move"] if pm["outcome"] == "elsewhere"
+                  and pm["absent_scan"] is not None
+                  and pm["relocated_scan"] == pm["absent_scan"]]
+    return {"moves": moves, **tot, "elsewhere_at_absence": len(at_absence),
             "found_fraction": tot["found"] / moves if moves else None,
             "noticed_gone_fraction": len(noticed) / moves if moves else None,
             # the baseline's false events subtracted: what the moves added

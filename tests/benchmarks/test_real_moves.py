@@ -54,3 +54,17 @@ def test_events_keep_each_kinds_first_scan_for_the_objects_asked(tmp_path):
     (tmp_path / "events.jsonl").write_text("".join(json.dumps(e) + "\n" for e in lines))
     assert _events_of(tmp_path, [3, 5]) == {3: {"absent": 40, "relocated": 52}, 5: {}}
     assert _events_of(tmp_path / "missing", [3]) == {3: {}}
+
+
+def test_totals_count_the_pieces_put_elsewhere_in_the_scan_they_were_noticed_gone():
+    # (40, 40): the absence's own match took it; (50, 61): a track's chair later; (None, 30):
+    # relocated without being noticed gone first
+    trial = {"moves": 3, "found": 0, "elsewhere": 3, "absent": 0, "unchanged": 0, "untied": 0,
+             "false_absent": 0, "false_relocated": 0, "added": 0, "added_on_moved": 0,
+             "per_move": [_move("elsewhere", 40, 40), _move("elsewhere", 50, 61),
+                          _move("elsewhere", None, 30)],
+             "static_ate_rmse_m": 0.3, "gatmo_ate_rmse_m": 0.1}
+    res = {"trials": [trial], "before": {"false_absent": 0, "false_relocated": 0, "added": 0},
+           "before_ate_rmse_m": 0.09}
+    t = _totals(res)
+    assert t["elsewhere"] == 3 and t["elsewhere_at_absence"] == 1
