@@ -356,6 +356,13 @@ class GatmoConfig(GatmoModel):
         True, description="the paper's order-free matching, one way: an object found absent "
         "is matched to the Gamma objects seen this run (chairs whose tracks ended unmatched). "
         "Off (tuning seeds 300-319): false relocations unchanged, found 18.1 % -> 17.3 %")
+    match_retake_from_gamma: bool = Field(
+        False, description="beyond the paper: an object the absence's match put on a Gamma "
+        "object stays, for the rest of the run, a candidate (as an absent one) for chairs "
+        "within doubt_search_m (and its extent) of where it was absent from; taken back, the "
+        "Gamma object joins the map at once. ACES with pieces moved in its map: found 0 -> 5 "
+        "of 12; halls 400-419 the same to the digit (fifty-fifth session, not yet measured "
+        "everywhere)")
     match_extent_check: bool = Field(
         False, description="beyond the paper: a chair whose returns in one scan reach past "
         "the object's sides (its cells' smallest rectangle) by more than "

@@ -170,6 +170,9 @@ class GatmoMapper:
         return cls(object_map, grid, cfg)
 
     def _reset_run_evidence(self) -> None:
+        # objects the absence's match put on a Gamma object this run -> the pose they were
+        # absent from (match_retake_from_gamma)
+        self._on_gamma: dict[int, tuple[np.ndarray, MapObject]] = {}
         self._seen: dict[int, set] = {}  # Alg. 1's I'_i (local cell indices)
         # each object's history length at the run's start (longer: placed by evidence this run)
         self._hist0 = {o.id: len(o.history) for o in self.object_map.objects}
@@ -1137,7 +1140,10 @@ class GatmoMapper:
                 self._try_match(m, stamp_s, events)  # its best object may be another one
             elif g in self.object_map.objects:
                 self.object_map.objects.remove(g)
+                absent_at = o.pose_xytheta.copy()
                 self._relocate(o, mt, stamp_s, events)
+                if self.cfg.match_retake_from_gamma:
+                    self._on_gamma[o.id] = (absent_at, g)
 
     # ---------------------------------------------------------- metaobjects
     def _track(self, pts, stamp_s, events, verified: bool = True) -> None:
@@ -1229,6 +1235,13 @@ class GatmoMapper:
                     out.append((0, o))
                 continue
             if o.status not in ("U", "M"):
+                continue
+            if o.id in self._on_gamma:
+                # placed on a Gamma object at its absence, before any live chair was seen:
+                # a chair near where it was absent from may take it back
+                if (np.hypot(*(self._on_gamma[o.id][0][:2] - c))
+                        < self.cfg.doubt_search_m + o.extent_m()):
+                    out.append((0, o))
                 continue
             confirmed = self._confirmed(o)
             near = np.hypot(*(o.pose_xytheta[:2] - c)) < self.cfg.doubt_search_m + o.extent_m()
@@ -1372,6 +1385,18 @@ class GatmoMapper:
                         and not lookalike(o2, o, self.cfg.lookalike_tolerance)):
                     return False
         self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)
+        taken = self._on_gamma.pop(o.id, None)
+        if taken is not None and taken[1] not in self.object_map.objects:
+            # taken back: what the Gamma object was still stands there, and held the object
+            # in the localizer's map until now; it joins the map as a new object at once
+            g = taken[1]
+            g.status = "M"
+            g.record(self.run, stamp_s)
+            self.object_map.objects.append(g)
+            events.append(Event(float(stamp_s), self.run, "added", g.id, g.label, None,
+                                g.pose_xytheta.tolist()))
+            self.counts["added"] += 1
+            self._rerender()
         m.matched_object = o.id
         return True
 

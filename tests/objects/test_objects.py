@@ -1416,6 +1416,38 @@ def test_an_absence_takes_a_gamma_corner_seen_this_run(to_gamma, relocated):
         assert np.min(np.hypot(*(corner - (5.0, 1.0)).T)) < 0.08
 
 
+@pytest.mark.parametrize("retake", [False, True])
+def test_a_chair_near_where_an_absent_cabinet_stood_takes_it_back_from_a_gamma_object(retake):
+    """The cabinet (0.9 x 0.45 m) is found absent while nothing near its place is a chair
+    yet, and the paper's order-free matching puts it on a Gamma corner seen earlier, 7 m away.
+    The robot then sees the cabinet itself 1 m from where the map had it. With
+    ``match_retake_from_gamma`` the chair there takes the cabinet back, with its id, and the
+    Gamma corner joins the map as a new object at once (it held the cabinet in the localizer's
+    map until then); without it the cabinet stays on the corner (ACES, moved pieces: found 0
+    -> 5 of 12, fifty-fifth session)."""
+    cab_box = (1.5, 4.2, 2.4, 4.65)
+    g = room_grid(12, 6, 0.05, boxes=[cab_box])
+    world = room_grid(12, 6, 0.05, boxes=[(2.5, 4.2, 3.4, 4.65)])  # shifted 1 m
+    om = ObjectMap.from_grid(g, CFG)
+    cab = next(o for o in om.objects if not o.structure)
+    m = GatmoMapper(om, g, CFG.model_copy(update={"match_retake_from_gamma": retake}))
+    m.begin_run(1)
+    gam = _corner_gamma(m, (9.5, 1.0), 0.45)
+    events: list = []
+    m._mark_absent(cab, 0.0, events)
+    assert [e.kind for e in events if e.object_id == cab.id] == ["absent", "relocated"]
+    assert np.hypot(*(cab.pose_xytheta[:2] - (9.7, 1.2))) < 0.6  # on the far corner
+    path = [(x, 2.5, np.pi / 2) for x in np.linspace(1.5, 4.0, 40)]
+    events = _drive(m, world, path, max_range_m=4.0) + m.end_run()
+    kinds = [(e.kind, e.object_id) for e in events]
+    assert (("relocated", cab.id) in kinds) == retake, (kinds, m.refusals)
+    if retake:
+        assert np.hypot(*(cab.pose_xytheta[:2] - (2.95, 4.425))) < 0.1
+        assert ("added", gam.id) in kinds and gam.status == "M"
+    else:
+        assert np.hypot(*(cab.pose_xytheta[:2] - (9.7, 1.2))) < 0.6
+
+
 @pytest.mark.parametrize(("max_move_m", "relocated"), [(None, True), (10.0, True), (3.0, False)])
 def test_match_max_move_m_bounds_how_far_a_match_moves_an_object(max_move_m, relocated):
     """The cabinet and the Gamma corner of the test above, 4.3 m apart: with
