@@ -1224,7 +1224,8 @@ class GatmoMapper:
         M), tier -1; with
         ``prior_earlier_poses``, movable ones elsewhere not seen at their place this run that
         stood near the chair before, tier -2 (only a match at an earlier pose counts, then as
-        tier 0)."""
+        tier 0); with ``match_retake_from_gamma``, one the absence's match put on a Gamma
+        object this run, tier 0 if the chair is near where it was absent from."""
         c = pts.mean(axis=0)
         out = []
         for o in self.object_map.objects:
