@@ -382,17 +382,21 @@ class GatmoMapper:
             if np.mean(self.base.cells[cy, cx] == FREE) < self.cfg.add_min_free_fraction:
                 continue
             taken[cy, cx] = True
-            o.status = "M"
-            o.record(self.run, self._last_stamp)
-            events.append(Event(self._last_stamp, self.run, "added", o.id, o.label, None,
-                                o.pose_xytheta.tolist()))
-            self.counts["added"] += 1
+            self._add(o, self._last_stamp, events)
         for o in self.object_map.placed():
             seen = self._confirmed(o) or self._placed_this_run(o)
             o.unseen_runs = 0 if seen else o.unseen_runs + 1
         self._withheld = self._unseen_ids()  # for the next run's localizer
         self._rerender()
         return events
+
+    def _add(self, o: MapObject, stamp_s, events) -> None:
+        """A Gamma object ``o`` joins the map as a new object (in M)."""
+        o.status = "M"
+        o.record(self.run, stamp_s)
+        events.append(Event(float(stamp_s), self.run, "added", o.id, o.label, None,
+                            o.pose_xytheta.tolist()))
+        self.counts["added"] += 1
 
     def _cells_if_stays(self, o: MapObject) -> tuple[np.ndarray, np.ndarray] | None:
         """The grid cells (rows, columns) of a Gamma object seen this run if it is still there
@@ -1390,13 +1394,8 @@ class GatmoMapper:
         if taken is not None and taken[1] not in self.object_map.objects:
             # taken back: what the Gamma object was still stands there, and held the object
             # in the localizer's map until now; it joins the map as a new object at once
-            g = taken[1]
-            g.status = "M"
-            g.record(self.run, stamp_s)
-            self.object_map.objects.append(g)
-            events.append(Event(float(stamp_s), self.run, "added", g.id, g.label, None,
-                                g.pose_xytheta.tolist()))
-            self.counts["added"] += 1
+            self.object_map.objects.append(taken[1])
+            self._add(taken[1], stamp_s, events)
             self._rerender()
         m.matched_object = o.id
         return True
