@@ -364,6 +364,12 @@ class GatmoConfig(GatmoModel):
         "Real logs with pieces moved in their maps: found 4 -> 10 of 36 (ACES 0 -> 5); ACES' "
         "unedited map ATE 0.078 -> 0.084 m; halls, offices, soak and the demo the same to "
         "the digit (fifty-fifth and fifty-sixth sessions)")
+    match_retake_from_chair: bool = Field(
+        False, description="beyond the paper: an object a track's chair took from A this "
+        "run, farther than doubt_search_m (and its extent) from where it was absent, stays a "
+        "candidate for chairs near that place for the rest of the run, as with "
+        "match_retake_from_gamma; taken back, the track it leaves is an unmatched chair again "
+        "(into Gamma if it has ended)")
     match_extent_check: bool = Field(
         False, description="beyond the paper: a chair whose returns in one scan reach past "
         "the object's sides (its cells' smallest rectangle) by more than "

@@ -67,6 +67,11 @@ def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
     return (tier, earlier, round(mt.score * 20) / 20, -_move_m(o, mt))
 
 
+def _move_m_xy(a_xytheta: np.ndarray, b_xytheta: np.ndarray) -> float:
+    """Distance between two poses' positions [m]."""
+    return float(np.hypot(*(b_xytheta[:2] - a_xytheta[:2])))
+
+
 def _move_m(o: MapObject, mt) -> float:
     """How far the match ``mt`` moves ``o``'s frame [m]."""
     return float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])))
@@ -173,6 +178,9 @@ class GatmoMapper:
         # objects the absence's match put on a Gamma object this run -> the pose they were
         # absent from (match_retake_from_gamma)
         self._on_gamma: dict[int, tuple[np.ndarray, MapObject]] = {}
+        # objects a track's chair took from A this run, far from where they were absent ->
+        # that pose and the track (match_retake_from_chair)
+        self._on_chair: dict[int, tuple[np.ndarray, Metaobject]] = {}
         self._seen: dict[int, set] = {}  # Alg. 1's I'_i (local cell indices)
         # each object's history length at the run's start (longer: placed by evidence this run)
         self._hist0 = {o.id: len(o.history) for o in self.object_map.objects}
@@ -1229,7 +1237,8 @@ class GatmoMapper:
         ``prior_earlier_poses``, movable ones elsewhere not seen at their place this run that
         stood near the chair before, tier -2 (only a match at an earlier pose counts, then as
         tier 0); with ``match_retake_from_gamma``, one the absence's match put on a Gamma
-        object this run, tier 0 if the chair is near where it was absent from."""
+        object this run, and with ``match_retake_from_chair``, one a far track's chair took
+        from A this run: tier 0 if the chair is near where it was absent from."""
         c = pts.mean(axis=0)
         out = []
         for o in self.object_map.objects:
@@ -1247,6 +1256,13 @@ class GatmoMapper:
                 if (np.hypot(*(self._on_gamma[o.id][0][:2] - c))
                         < self.cfg.doubt_search_m + o.extent_m()):
                     out.append((0, o))
+                continue
+            if o.id in self._on_chair and (
+                    np.hypot(*(self._on_chair[o.id][0][:2] - c))
+                    < self.cfg.doubt_search_m + o.extent_m()):
+                # a far chair took it from A: a chair near where it was absent from may take
+                # it back (not the same track: its chair is not near there)
+                out.append((0, o))
                 continue
             confirmed = self._confirmed(o)
             near = np.hypot(*(o.pose_xytheta[:2] - c)) < self.cfg.doubt_search_m + o.extent_m()
@@ -1389,7 +1405,15 @@ class GatmoMapper:
                 if (o2 is not o and k2[:2] == best[0][:2] and k2[2] >= best[0][2] - 0.05
                         and not lookalike(o2, o, self.cfg.lookalike_tolerance)):
                     return False
+        absent_at = o.pose_xytheta.copy() if o.status == "A" else None
         self._relocate(o, mt, stamp_s, events, support_scans=m.n_obs)
+        left = self._on_chair.pop(o.id, None)
+        if left is not None:
+            self._release(left[1], stamp_s, events)
+        if (self.cfg.match_retake_from_chair and absent_at is not None
+                and _move_m_xy(absent_at, o.pose_xytheta)
+                >= self.cfg.doubt_search_m + o.extent_m()):
+            self._on_chair[o.id] = (absent_at, m)
         taken = self._on_gamma.pop(o.id, None)
         if taken is not None and taken[1] not in self.object_map.objects:
             # taken back: what the Gamma object was still stands there, and held the object
@@ -1399,6 +1423,14 @@ class GatmoMapper:
             self._rerender()
         m.matched_object = o.id
         return True
+
+    def _release(self, m: Metaobject, stamp_s, events) -> None:
+        """Track ``m``'s chair lost the object it had been matched to
+        (``match_retake_from_chair``): it is an unmatched chair again, as if no match had been
+        made; a track that has ended joins Gamma now, as it would have then."""
+        m.matched_object = None
+        if not any(t is m for t in self._meta):
+            self._end_track(m, stamp_s, events)
 
     def _settle(self, m: Metaobject, stamp_s, events) -> bool:
         """A leaving track whose match waited on ambiguity takes its best match now, with

@@ -1448,6 +1448,43 @@ def test_a_chair_near_where_an_absent_cabinet_stood_takes_it_back_from_a_gamma_o
         assert np.hypot(*(cab.pose_xytheta[:2] - (9.7, 1.2))) < 0.6
 
 
+@pytest.mark.parametrize("retake", [False, True])
+def test_a_chair_near_where_an_absent_cabinet_stood_takes_it_back_from_a_far_chair(retake):
+    """The cabinet (0.9 x 0.45 m) is absent; the robot first sees an identical cabinet the
+    map never had, 7 m away, whose chair takes it. Then it sees the cabinet itself 1 m from
+    where the map had it. With ``match_retake_from_chair`` the chair there takes the cabinet
+    back, with its id, and the far cabinet, its track's chair unmatched again, joins the map
+    at the run's end; without it the cabinet stays on the far one and the one at its true
+    place joins the map as new."""
+    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.4, 4.65)])
+    world = room_grid(12, 6, 0.05, boxes=[(2.5, 4.2, 3.4, 4.65), (9.0, 1.0, 9.9, 1.45)])
+    om = ObjectMap.from_grid(g, CFG)
+    cab = next(o for o in om.objects if not o.structure)
+    m = GatmoMapper(om, g, CFG.model_copy(update={"match_retake_from_chair": retake}))
+    m.begin_run(1)
+    events: list = []
+    m._mark_absent(cab, 0.0, events)
+    path = [(x, 2.5, -np.pi / 2) for x in np.linspace(8.0, 10.5, 40)]
+    path += [(x, 2.5, np.pi / 2) for x in np.linspace(1.5, 4.0, 40)]
+    for i, pose in enumerate(path):
+        t = 0.1 * (i + 1)
+        s = make_scan(world, pose, n_beams=361, max_range_m=4.0, stamp_s=t)
+        events += m.update(np.array(pose), s, pose_confident=True, stamp_s=t)
+        if i == 39:  # the far cabinet took it
+            assert np.hypot(*(cab.pose_xytheta[:2] - (9.45, 1.225))) < 0.1, m.refusals
+    events += m.end_run()
+    added = [e.pose_new for e in events if e.kind == "added"]
+    assert len(added) == 1, [(e.kind, e.object_id) for e in events]
+    true_place, far_place = (2.95, 4.425), (9.45, 1.225)
+    if retake:
+        assert np.hypot(*(cab.pose_xytheta[:2] - true_place)) < 0.1
+        # an added thing's pose is the centre of the cells seen of it (the near sides)
+        assert np.hypot(*(np.array(added[0][:2]) - far_place)) < 0.3
+    else:
+        assert np.hypot(*(cab.pose_xytheta[:2] - far_place)) < 0.1
+        assert np.hypot(*(np.array(added[0][:2]) - true_place)) < 0.3
+
+
 @pytest.mark.parametrize(("max_move_m", "relocated"), [(None, True), (10.0, True), (3.0, False)])
 def test_match_max_move_m_bounds_how_far_a_match_moves_an_object(max_move_m, relocated):
     """The cabinet and the Gamma corner of the test above, 4.3 m apart: with
