@@ -370,7 +370,7 @@ class GatmoConfig(GatmoModel):
         "candidate for chairs near that place for the rest of the run, as with "
         "match_retake_from_gamma; taken back, the track it leaves is an unmatched chair again "
         "(into Gamma if it has ended). Hall seed 400: found 2 -> 6 of 20, twin swaps 3 -> 1; "
-        "hall 305 a twin swap fewer, a piece less noticed gone; the other 49 hall seeds, the "
+        "hall 305 a twin swap fewer, a piece less noticed gone; the other 48 hall seeds, the "
         "offices, soak chains 11 and 14, the real moves and the demo the same to the digit "
         "(fifty-sixth session)")
     match_extent_check: bool = Field(

@@ -67,11 +67,6 @@ def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
     return (tier, earlier, round(mt.score * 20) / 20, -_move_m(o, mt))
 
 
-def _move_m_xy(a_xytheta: np.ndarray, b_xytheta: np.ndarray) -> float:
-    """Distance between two poses' positions [m]."""
-    return float(np.hypot(*(b_xytheta[:2] - a_xytheta[:2])))
-
-
 def _move_m(o: MapObject, mt) -> float:
     """How far the match ``mt`` moves ``o``'s frame [m]."""
     return float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])))
@@ -1253,13 +1248,10 @@ class GatmoMapper:
             if o.id in self._on_gamma:
                 # placed on a Gamma object at its absence, before any live chair was seen:
                 # a chair near where it was absent from may take it back
-                if (np.hypot(*(self._on_gamma[o.id][0][:2] - c))
-                        < self.cfg.doubt_search_m + o.extent_m()):
+                if self._within_retake(o, self._on_gamma[o.id][0], c):
                     out.append((0, o))
                 continue
-            if o.id in self._on_chair and (
-                    np.hypot(*(self._on_chair[o.id][0][:2] - c))
-                    < self.cfg.doubt_search_m + o.extent_m()):
+            if o.id in self._on_chair and self._within_retake(o, self._on_chair[o.id][0], c):
                 # a far chair took it from A: a chair near where it was absent from may take
                 # it back (not the same track: its chair is not near there)
                 out.append((0, o))
@@ -1276,6 +1268,12 @@ class GatmoMapper:
                 if np.any(np.hypot(*(q[:, :2] - c).T) < self.cfg.doubt_search_m + o.extent_m()):
                     out.append((-2, o))
         return out
+
+    def _within_retake(self, o: MapObject, absent_at: np.ndarray, xy: np.ndarray) -> bool:
+        """``xy`` (2,) is near enough to ``absent_at`` (the pose ``o`` was absent from) for a
+        chair there to take ``o`` back (``match_retake_from_gamma``, ``..._from_chair``):
+        within ``doubt_search_m`` plus its extent."""
+        return bool(np.hypot(*(absent_at[:2] - xy)) < self.cfg.doubt_search_m + o.extent_m())
 
     def _absent_too_long(self, o: MapObject) -> bool:
         """With ``absent_candidate_runs``: ``o`` has been absent for more runs than that (since
@@ -1411,8 +1409,7 @@ class GatmoMapper:
         if left is not None:
             self._release(left[1], stamp_s, events)
         if (self.cfg.match_retake_from_chair and absent_at is not None
-                and _move_m_xy(absent_at, o.pose_xytheta)
-                >= self.cfg.doubt_search_m + o.extent_m()):
+                and not self._within_retake(o, absent_at, o.pose_xytheta[:2])):
             self._on_chair[o.id] = (absent_at, m)
         taken = self._on_gamma.pop(o.id, None)
         if taken is not None and taken[1] not in self.object_map.objects:
