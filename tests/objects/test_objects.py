@@ -1416,6 +1416,19 @@ def test_an_absence_takes_a_gamma_corner_seen_this_run(to_gamma, relocated):
         assert np.min(np.hypot(*(corner - (5.0, 1.0)).T)) < 0.08
 
 
+def _cabinet_room(world_boxes, **cfg):
+    """(mapper in run 1, the cabinet, the world): a 12 x 6 m room's map with one cabinet (0.9 x
+    0.45 m at (1.5-2.4, 4.2-4.65)), the mapper's config ``cfg`` over CFG, and the world as it
+    now stands with ``world_boxes`` instead."""
+    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.4, 4.65)])
+    world = room_grid(12, 6, 0.05, boxes=world_boxes)
+    om = ObjectMap.from_grid(g, CFG)
+    cab = next(o for o in om.objects if not o.structure)
+    m = GatmoMapper(om, g, CFG.model_copy(update=cfg))
+    m.begin_run(1)
+    return m, cab, world
+
+
 @pytest.mark.parametrize("retake", [False, True])
 def test_a_chair_near_where_an_absent_cabinet_stood_takes_it_back_from_a_gamma_object(retake):
     """The cabinet (0.9 x 0.45 m) is found absent while nothing near its place is a chair
@@ -1425,13 +1438,8 @@ def test_a_chair_near_where_an_absent_cabinet_stood_takes_it_back_from_a_gamma_o
     Gamma corner joins the map as a new object at once (it held the cabinet in the localizer's
     map until then); without it the cabinet stays on the corner (ACES, moved pieces: found 0
     -> 5 of 12, fifty-fifth session)."""
-    cab_box = (1.5, 4.2, 2.4, 4.65)
-    g = room_grid(12, 6, 0.05, boxes=[cab_box])
-    world = room_grid(12, 6, 0.05, boxes=[(2.5, 4.2, 3.4, 4.65)])  # shifted 1 m
-    om = ObjectMap.from_grid(g, CFG)
-    cab = next(o for o in om.objects if not o.structure)
-    m = GatmoMapper(om, g, CFG.model_copy(update={"match_retake_from_gamma": retake}))
-    m.begin_run(1)
+    m, cab, world = _cabinet_room([(2.5, 4.2, 3.4, 4.65)],  # shifted 1 m
+                                  match_retake_from_gamma=retake)
     gam = _corner_gamma(m, (9.5, 1.0), 0.45)
     events: list = []
     m._mark_absent(cab, 0.0, events)
@@ -1456,12 +1464,8 @@ def test_a_chair_near_where_an_absent_cabinet_stood_takes_it_back_from_a_far_cha
     back, with its id, and the far cabinet, its track's chair unmatched again, joins the map
     at the run's end; without it the cabinet stays on the far one and the one at its true
     place joins the map as new."""
-    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.4, 4.65)])
-    world = room_grid(12, 6, 0.05, boxes=[(2.5, 4.2, 3.4, 4.65), (9.0, 1.0, 9.9, 1.45)])
-    om = ObjectMap.from_grid(g, CFG)
-    cab = next(o for o in om.objects if not o.structure)
-    m = GatmoMapper(om, g, CFG.model_copy(update={"match_retake_from_chair": retake}))
-    m.begin_run(1)
+    m, cab, world = _cabinet_room([(2.5, 4.2, 3.4, 4.65), (9.0, 1.0, 9.9, 1.45)],
+                                  match_retake_from_chair=retake)
     events: list = []
     m._mark_absent(cab, 0.0, events)
     path = [(x, 2.5, -np.pi / 2) for x in np.linspace(8.0, 10.5, 40)]
