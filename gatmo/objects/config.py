@@ -274,6 +274,14 @@ class GatmoConfig(GatmoModel):
     small_object_area_m2: float = Field(
         0.045, ge=0, description="objects with less occupied area are small: matched only "
         "within doubt_search_m, absent only with no returns around them")
+    match_twin_nearest: bool = Field(
+        True, description="beyond the paper: of candidates for one chair in the same tier "
+        "that look alike (lookalike_tolerance), the one nearest to where it was, unless the "
+        "best scores more than match_twin_score_margin above it: between twins the edge "
+        "score's difference is where the map's cells fell, not which piece it is")
+    match_twin_score_margin: float = Field(
+        0.05, ge=0, description="match_twin_nearest: a look-alike scoring at most this much "
+        "below the best counts as scoring as well")
     lookalike_tolerance: float = Field(
         0.15, gt=0, description="two objects look alike when their cell counts and principal "
         "extents differ by at most this fraction: a moved object makes its look-alikes movable, "

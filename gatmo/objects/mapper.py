@@ -67,6 +67,25 @@ def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
     return (tier, earlier, round(mt.score * 20) / 20, -_move_m(o, mt))
 
 
+def _nearest_twin(best: tuple, rivals: list[tuple], cfg: GatmoConfig) -> tuple:
+    """``match_twin_nearest``: of the (rank key, object, match) ``rivals`` for one chair, the
+    one nearest to where it was among those that look alike to ``best``'s object, rank in its
+    tier with the same prior (the key's first two fields) and score within
+    ``match_twin_score_margin`` of it; else ``best``. The key rounds the score to 0.05, so a
+    twin 0.03 below the best (two footstools' cells laid at different angles) ranked a step
+    lower, and the farther twin took the chair (hall 301, run 3: the absent footstool 6.1 m
+    away scored 0.87, its twin 10.0 m away 0.90)."""
+    key, o, mt = best
+    for k2, o2, mt2 in rivals:
+        if (o2 is o or k2[:2] != key[:2]
+                or mt2.score < mt.score - cfg.match_twin_score_margin
+                or _move_m(o2, mt2) >= _move_m(best[1], best[2])
+                or not lookalike(o2, o, cfg.lookalike_tolerance)):
+            continue
+        best = (k2, o2, mt2)
+    return best
+
+
 def _move_m(o: MapObject, mt) -> float:
     """How far the match ``mt`` moves ``o``'s frame [m]."""
     return float(np.hypot(*(mt.pose_xytheta[:2] - o.pose_xytheta[:2])))
@@ -1390,6 +1409,8 @@ class GatmoMapper:
                 best = (key, o, mt)
         if best is None:
             return False
+        if self.cfg.match_twin_nearest:
+            best = _nearest_twin(best, rivals, self.cfg)
         _, o, mt = best
         if (self.cfg.match_ambiguity_wait and not settle
                 and m.n_obs < self.cfg.match_ambiguity_patience_scans

@@ -10,7 +10,7 @@ from gatmo.geometry import transform_points
 from gatmo.maps.grid import OCCUPIED
 from gatmo.maps.object_io import load_objects, save_objects
 from gatmo.objects import GatmoConfig, GatmoMapper, ObjectMap
-from gatmo.objects.matching import match_points
+from gatmo.objects.matching import lookalike, match_points
 from gatmo.objects.meanshift import mean_shift
 from gatmo.objects.metaobject import Metaobject
 from gatmo.objects.objectmap import shape_from_points
@@ -1843,3 +1843,33 @@ def test_an_object_absent_for_many_runs_is_no_candidate_with_absent_candidate_ru
     kinds = [e.kind for e in events if e.kind != "gamma"]
     assert kinds == (["relocated"] if relocated else ["added"])
     assert (box.status == "M") == relocated
+
+
+def test_of_twin_candidates_scoring_alike_the_nearest_takes_the_chair():
+    """``match_twin_nearest``: two identical cabinets (0.9 x 0.45 m) and a smaller box are
+    candidates for one chair at (4, 3). The far cabinet scores 0.03 higher: without the option
+    it takes the chair (the rank key rounds the score to 0.05); with it the nearer twin does,
+    but not a twin scoring more than ``match_twin_score_margin`` lower, nor one in a lower
+    tier, nor a nearer object that does not look alike."""
+    from types import SimpleNamespace
+
+    from gatmo.objects.mapper import _nearest_twin, _rank_key
+
+    g = room_grid(12, 6, 0.05, boxes=[(1.5, 4.2, 2.4, 4.65), (9.5, 4.2, 10.4, 4.65),
+                                       (5.0, 1.0, 5.3, 1.3)])
+    near_cab, box, far_cab = sorted((o for o in ObjectMap.from_grid(g, CFG).objects
+                                     if not o.structure), key=lambda o: o.pose_xytheta[0])
+    # twins to the lookalike test, though rasterized a cell column apart (180 and 190 cells)
+    assert lookalike(near_cab, far_cab, CFG.lookalike_tolerance)
+    assert not lookalike(near_cab, box, CFG.lookalike_tolerance)
+
+    def cand(o, score, tier=0):
+        mt = SimpleNamespace(score=score, pose_xytheta=np.array([4.0, 3.0, 0.0]))
+        return _rank_key(o, mt, tier, False), o, mt
+
+    far = cand(far_cab, 0.90)
+    assert far[0][2] > cand(near_cab, 0.87)[0][2]  # the key alone prefers the far twin
+    assert _nearest_twin(far, [far, cand(near_cab, 0.87)], CFG)[1] is near_cab
+    assert _nearest_twin(far, [far, cand(near_cab, 0.80)], CFG)[1] is far_cab
+    assert _nearest_twin(far, [far, cand(near_cab, 0.90, tier=-1)], CFG)[1] is far_cab
+    assert _nearest_twin(far, [far, cand(box, 0.90)], CFG)[1] is far_cab
