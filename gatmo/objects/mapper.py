@@ -69,12 +69,12 @@ def _rank_key(o: MapObject, mt, tier: int, earlier: bool) -> tuple:
 
 def _nearest_twin(best: tuple, rivals: list[tuple], cfg: GatmoConfig) -> tuple:
     """``match_twin_nearest``: of the (rank key, object, match) ``rivals`` for one chair, the
-    one nearest to where it was among those that look alike to ``best``'s object, rank in its
-    tier with the same prior (the key's first two fields) and score within
-    ``match_twin_score_margin`` of it; else ``best``. The key rounds the score to 0.05, so a
-    twin 0.03 below the best (two footstools' cells laid at different angles) ranked a step
-    lower, and the farther twin took the chair (hall 301, run 3: the absent footstool 6.1 m
-    away scored 0.87, its twin 10.0 m away 0.90)."""
+    one nearest to where it was among ``best`` and those that look alike to ``best``'s object,
+    rank in its tier with the same prior (the key's first two fields) and score at most
+    ``match_twin_score_margin`` below it. The key rounds the score to 0.05, so a twin 0.03
+    below the best (two identical pieces' map cells fall differently on the grid) ranked a
+    step lower, and the farther twin took the chair (hall 301, run 3: the absent footstool
+    6.1 m away scored 0.87, its twin 10.0 m away 0.90)."""
     key, o, mt = best
     for k2, o2, mt2 in rivals:
         if (o2 is o or k2[:2] != key[:2]
