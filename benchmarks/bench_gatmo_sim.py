@@ -111,11 +111,13 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
     old place seen through and its new place seen, from the true poses: "both", "old", "new",
     "none"), for relocations the scan index at which it happened, the matching tests that
     refused a chair as its object that run (``refusals``: test -> count; of them, those that
-    refused the chair at its new place: ``refusals_at_new_place``, :func:`refusals_near`), and
+    refused the chair at its new place: ``refusals_at_new_place``, :func:`refusals_near`),
+    what stands on its new place at the run's end (``new_place``, :func:`new_place`), and
     the evidence GATMO had of it (:func:`piece_evidence`)."""
     from gatmo.maps.object_io import load_objects
     from gatmo.pipeline.evaluate import (
         object_state,
+        objects_on_pieces,
         observed,
         piece_outcome,
         piece_views,
@@ -138,6 +140,8 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
         trace = res.traces[(k, "gatmo")]
         events = trace.events
         gt = np.array([sc.gt_pose_xytheta for sc in scans])
+        on, _ = objects_on_pieces(om, doc, k + 1)
+        labels = {p["id"]: p["label"] for p in run["objects"]}
         for c in run["changes"]:
             if c["kind"] not in ("moved", "shifted") or c["id"] not in p2o:
                 continue
@@ -158,9 +162,43 @@ def piece_outcomes(scen, res, cmp_dir: Path) -> list[dict]:
                         "refusals": refusals_of(trace.refusals, o.id),
                         "refusals_at_new_place": refusals_near(
                             trace.refused_at, o.id, cur.get(c["id"])),
+                        "new_place": new_place(o.id, on.get(c["id"], []), c["label"], ties,
+                                               labels, events),
                         **piece_evidence(views[0] | views[1], trace, gt),
                         **new_place_views(views[1], trace)})
         prev = cur
+    return out
+
+
+def new_place(object_id: int, on: list[int], label: str, ties: dict[int, int],
+              labels: dict[int, str], events: list[dict]) -> str:
+    """What stands on a moved piece's new place in the object map at the run's end (``on``:
+    the ids of the objects on the piece, :func:`~gatmo.pipeline.evaluate.objects_on_pieces`):
+    "own" (its object ``object_id``), "twin" (an object tied to another piece of the piece's
+    ``label``; ``labels``: piece id -> label), "added" (a new object added this run: the map
+    right, the identity lost), "other" (any other object), or "nothing"."""
+    if object_id in on:
+        return "own"
+    if any(labels.get(ties.get(oid, -1)) == label for oid in on):
+        return "twin"
+    added = {e["object_id"] for e in events if e["kind"] == "added"}
+    if any(oid in added for oid in on):
+        return "added"
+    return "other" if on else "nothing"
+
+
+def new_place_by_outcome(outcomes: list[dict]) -> dict:
+    """Over pieces seen at both places: per outcome, what stands on the new place at the run's
+    end (:func:`new_place`: own, twin, added, other, nothing), and the share of those pieces
+    whose new place holds some object put there (``mapped``: the localizer's map right
+    there, whatever the identity). A missed piece shifted by less than its size may have its
+    own object, never moved, still covering half its new footprint: not counted as mapped."""
+    both = [o for o in outcomes if o["observed"] == "both" and "new_place" in o]
+    out: dict = {kind: dict(Counter(o["new_place"] for o in both if o["outcome"] == kind))
+                 for kind in ("found", "twin", "wrong", "absent", "missed")}
+    put = [o["new_place"] != "nothing" and not (o["outcome"] == "missed"
+                                                and o["new_place"] == "own") for o in both]
+    out["mapped"] = sum(put) / len(both) if both else None
     return out
 
 
@@ -412,6 +450,7 @@ def summarize(rows: list[dict], *, preset: str, runs: int, overrides: list[str],
     total["refusals_seen_both"] = refusals_by_outcome([o for r in rows for o in r["outcomes"]])
     total["seen_both_by_run_and_start"] = by_run_and_start(
         [o for r in rows for o in r["outcomes"]])
+    total["new_place_seen_both"] = new_place_by_outcome([o for r in rows for o in r["outcomes"]])
     return total
 
 

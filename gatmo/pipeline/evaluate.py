@@ -167,25 +167,19 @@ def score_run(object_map, ties: dict[int, int], scenario: dict, run: int,
 CENSUS_KEYS = ("pieces", "on_piece", "duplicate", "stale", "fixed", "pieces_unmapped")
 
 
-def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
-               near_m: float = 0.1) -> dict:
-    """What the objects placed in the map (U, M; walls left out) stand on after run ``run``
-    (1-based), against the pieces of that run's layout. An object stands on a piece when at
-    least half of its cells lie within ``near_m`` of the piece's footprint (the piece it covers
-    most). Per piece one object on it counts as ``on_piece`` and the rest as ``duplicate``
-    (which object, its own or another's, is not asked); an object on no piece is ``fixed``
-    when it is tied to none and its footprint is still within ``near_m`` (mean distance) of
-    where the static map drew it (a column), else
-    ``stale`` (left where a piece stood, or made of nothing). ``pieces_unmapped``: pieces no
-    object stands on; ``stale_ids``: the stale objects' ids."""
+def objects_on_pieces(object_map, scenario: dict, run: int,
+                      near_m: float = 0.1) -> tuple[dict[int, list[int]], list]:
+    """Which objects placed in the map (U, M; walls left out) stand on which piece of run
+    ``run``'s layout (1-based): an object stands on a piece when at least half of its cells
+    lie within ``near_m`` of the piece's footprint (the piece it covers most). Returns piece
+    id -> the ids of the objects on it, and the objects on no piece."""
     res = scenario.get("resolution_m", 0.05)
     layout = scenario["runs"][run - 1]["objects"]
     trees = {p["id"]: cKDTree(transform_points(np.array(p["pose"], dtype=float),
                                                _piece_points(p, res)))
              for p in layout}
     on: dict[int, list[int]] = {}
-    out = {"on_piece": 0, "duplicate": 0, "stale": 0, "fixed": 0}
-    stale_ids = []
+    off = []
     for o in object_map.placed():
         if o.structure:
             continue
@@ -198,8 +192,28 @@ def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
                 best, best_n = pid, n
         if best is not None:
             on.setdefault(best, []).append(o.id)
-        elif (o.id not in ties and o.base_pose_xytheta is not None
-              and placement_error(o, o.base_pose_xytheta)[0] < near_m):
+        else:
+            off.append(o)
+    return on, off
+
+
+def map_census(object_map, ties: dict[int, int], scenario: dict, run: int,
+               near_m: float = 0.1) -> dict:
+    """What the objects placed in the map (U, M; walls left out) stand on after run ``run``
+    (1-based), against the pieces of that run's layout (:func:`objects_on_pieces`). Per piece
+    one object on it counts as ``on_piece`` and the rest as ``duplicate``
+    (which object, its own or another's, is not asked); an object on no piece is ``fixed``
+    when it is tied to none and its footprint is still within ``near_m`` (mean distance) of
+    where the static map drew it (a column), else
+    ``stale`` (left where a piece stood, or made of nothing). ``pieces_unmapped``: pieces no
+    object stands on; ``stale_ids``: the stale objects' ids."""
+    layout = scenario["runs"][run - 1]["objects"]
+    on, off = objects_on_pieces(object_map, scenario, run, near_m)
+    out = {"on_piece": 0, "duplicate": 0, "stale": 0, "fixed": 0}
+    stale_ids = []
+    for o in off:
+        if (o.id not in ties and o.base_pose_xytheta is not None
+                and placement_error(o, o.base_pose_xytheta)[0] < near_m):
             # a column or clutter of the static map, where the map has it: a match that
             # "restored" it a few cm (the chair seen there was its own surface) moves nothing
             out["fixed"] += 1

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from benchmarks.bench_gatmo_sim import summarize
+from benchmarks.bench_gatmo_sim import new_place, new_place_by_outcome, summarize
 from gatmo.pipeline.evaluate import CENSUS_KEYS
 
 
@@ -149,3 +149,28 @@ def test_finds_are_told_by_run_and_by_the_state_the_run_started_from():
     assert t["found_by_run"] == {1: [3, 2], 2: [3, 1], 3: [1, 0]}
     assert t["outcome_by_start"] == {"right": {"found": 3, "absent": 1, "wrong": 1},
                                      "twin": {"twin": 1}, "absent": {"missed": 1}}
+
+
+def test_what_stands_on_a_moved_piece_s_new_place_is_told_by_whose_object_it_is():
+    """Piece 7 (a box) stands where objects 3 and 5 stand: its own object 3 comes first; an
+    object tied to the other box (piece 8) is its twin's; one added this run is a new object
+    (the map right, the identity lost); a desk's object is another's; none is nothing."""
+    ties = {3: 7, 4: 8, 6: 9}
+    labels = {7: "box", 8: "box", 9: "desk"}
+    added = [{"kind": "added", "object_id": 5}, {"kind": "relocated", "object_id": 4}]
+    assert new_place(3, [5, 3], "box", ties, labels, added) == "own"
+    assert new_place(3, [5, 4], "box", ties, labels, added) == "twin"
+    assert new_place(3, [5], "box", ties, labels, added) == "added"
+    assert new_place(3, [6], "box", ties, labels, added) == "other"
+    assert new_place(3, [], "box", ties, labels, added) == "nothing"
+    outcomes = [{"observed": "both", "outcome": "found", "new_place": "own"},
+                {"observed": "both", "outcome": "absent", "new_place": "added"},
+                {"observed": "both", "outcome": "absent", "new_place": "nothing"},
+                {"observed": "old", "outcome": "absent", "new_place": "nothing"},
+                # shifted less than its size, missed: its unmoved object covers the new place
+                {"observed": "both", "outcome": "missed", "new_place": "own"},
+                {"observed": "both", "outcome": "missed"}]  # written before the field
+    t = new_place_by_outcome(outcomes)
+    assert t["found"] == {"own": 1} and t["absent"] == {"added": 1, "nothing": 1}
+    assert t["missed"] == {"own": 1}
+    assert t["mapped"] == pytest.approx(2 / 4)

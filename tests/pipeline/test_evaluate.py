@@ -161,7 +161,7 @@ def test_observed_tells_whether_the_old_place_was_seen_through_and_the_new_one_s
 
 def test_map_census_counts_duplicates_stale_objects_and_unmapped_pieces():
     from gatmo.objects.objectmap import ObjectMap
-    from gatmo.pipeline.evaluate import map_census
+    from gatmo.pipeline.evaluate import map_census, objects_on_pieces
 
     def obj(oid, pose, base):
         o = _box_object(pose)
@@ -186,6 +186,9 @@ def test_map_census_counts_duplicates_stale_objects_and_unmapped_pieces():
     c = map_census(om, {1: 7, 3: 8, 4: 8, 6: 9}, scen, 1)
     assert c == {"on_piece": 2, "duplicate": 1, "stale": 2, "fixed": 2, "pieces": 3,
                  "pieces_unmapped": 1, "stale_ids": [4, 11]}
+    on, off = objects_on_pieces(om, scen, 1)
+    assert on == {7: [1, 2], 8: [3]}
+    assert [o.id for o in off] == [4, 5, 10, 11]
 
 
 def test_seen_through_counts_points_a_true_beam_passed():
