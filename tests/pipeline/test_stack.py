@@ -1349,3 +1349,53 @@ def test_the_alignment_and_the_relocalizer_share_one_edge_extraction_per_map(mon
     st.begin_run(2)
     st._relocalizer()
     assert len(calls) == 2
+
+
+def test_blend_poses_weighs_each_pose_by_the_inverse_of_its_variance():
+    """Equal deviations: the midpoint, the heading averaged across +-pi; a pose twice as
+    uncertain gets a fifth of the weight (1/4 against 1)."""
+    from gatmo.pipeline.stack import blend_poses
+
+    a = np.array([1.0, 2.0, np.pi - 0.1])
+    b = np.array([2.0, 0.0, -np.pi + 0.1])
+    mid = blend_poses(a, b, 0.1, 0.1)
+    np.testing.assert_allclose(mid[:2], [1.5, 1.0], atol=1e-12)
+    assert abs(abs(mid[2]) - np.pi) < 1e-9
+    np.testing.assert_allclose(blend_poses(a, b, 0.2, 0.1)[:2], [1.8, 0.4], atol=1e-12)
+    np.testing.assert_allclose(blend_poses(a, b, 0.1, 0.2)[:2], [1.2, 1.6], atol=1e-12)
+
+
+def test_blended_publishing_averages_the_carried_pose_with_the_filter_s():
+    """``publish_blend``: after each confirmed scan the carried pose (odometry exact here) and
+    the filter's (6 cm / 1.7 deg off) are averaged, the filter's weight growing with the
+    travel since the confirmation: err = |bias| * w_filter, w_filter = sc^2 / (sc^2 + sf^2)
+    with sc = base + per_m * travel; past ``publish_blend_max_m`` the filter's pose alone."""
+    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
+    grid = room_grid(6, 4, 0.05, boxes=boxes)
+    n = 30
+    truth = np.stack([np.linspace(1.6, 4.2, n), np.full(n, 1.9), np.linspace(0.0, 0.3, n)],
+                     axis=1)  # 9 cm per scan
+    bias = np.array([0.05, -0.03, 0.03])
+    confident = [0, 5, 10]
+    loc = ScriptedLocalizer(truth, confident_at=confident, bias=bias)
+    fusion = FusionConfig(publish_blend=True, publish_blend_base_std_m=0.02,
+                          publish_blend_odom_std_per_m=0.1, publish_blend_filter_std_m=0.05,
+                          publish_blend_max_m=1.0, use_scan_matcher=False,
+                          absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0)
+    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
+    stack.begin_run(1)
+    scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
+                       odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
+    out = [stack.step(s) for s in scans]
+    assert [i for i, o in enumerate(out) if o.gatmo_pose_verified] == confident
+    published = np.array([o.pose_xytheta for o in out])
+    err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
+    assert np.all(err[confident] < 0.01)
+    step_m = np.hypot(*(truth[1, :2] - truth[0, :2]))
+    for i in range(11, 22):
+        sc = 0.02 + 0.1 * step_m * (i - 10)
+        w_filter = sc**2 / (sc**2 + 0.05**2)
+        # the alignment's pose on scan 10 is within a few mm of the truth
+        assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
+    assert np.all(np.diff(err[11:22]) > 0)  # the filter's weight grows with the travel
+    np.testing.assert_allclose(published[22:], truth[22:] + bias, atol=1e-9)
