@@ -694,27 +694,34 @@ class _MapOnly:
         return []
 
 
+def _publishing_run(fusion: FusionConfig, confident: list[int]):
+    """(truth (30, 3), the localizer's bias (3,), the steps): a robot driving 9 cm per scan
+    through a room of eight boxes, the scripted localizer off by the bias and strictly
+    confident on the scans ``confident``, odometry exact."""
+    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
+    grid = room_grid(6, 4, 0.05, boxes=boxes)
+    n = 30
+    truth = np.stack([np.linspace(1.6, 4.2, n), np.full(n, 1.9), np.linspace(0.0, 0.3, n)],
+                     axis=1)
+    bias = np.array([0.05, -0.03, 0.03])
+    loc = ScriptedLocalizer(truth, confident_at=confident, bias=bias)
+    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
+    stack.begin_run(1)
+    scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
+                       odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
+    return truth, bias, [stack.step(s) for s in scans]
+
+
 @pytest.mark.parametrize("publish", ["localizer", "aligned"])
 def test_aligned_publishing_reports_the_confirmed_pose_carried_by_odometry(publish):
     """``publish_pose: aligned``: the localizer is 6 cm / 1.7 deg off and strictly confident
     on every fifth scan; there the scan-to-map alignment confirms the true pose, the next
     scans carry it by odometry (here exact) until ``publish_carry_m``, and beyond that the
     localizer's own pose is published again. The default publishes the localizer's pose."""
-    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
-    grid = room_grid(6, 4, 0.05, boxes=boxes)
-    n = 30
-    truth = np.stack([np.linspace(1.6, 4.2, n), np.full(n, 1.9), np.linspace(0.0, 0.3, n)],
-                     axis=1)  # 9 cm per scan
-    bias = np.array([0.05, -0.03, 0.03])
-    confident = list(range(0, 11, 5))  # 0, 5, 10: none after scan 10
-    loc = ScriptedLocalizer(truth, confident_at=confident, bias=bias)
-    fusion = FusionConfig(publish_pose=publish, publish_carry_m=0.3, use_scan_matcher=False,
-                          absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0)
-    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
-    stack.begin_run(1)
-    scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
-                       odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
-    out = [stack.step(s) for s in scans]
+    confident = [0, 5, 10]  # none after scan 10
+    truth, bias, out = _publishing_run(
+        FusionConfig(publish_pose=publish, publish_carry_m=0.3, use_scan_matcher=False,
+                     absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0), confident)
     published = np.array([o.pose_xytheta for o in out])
     err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
     assert [i for i, o in enumerate(out) if o.gatmo_pose_verified] == confident
@@ -1370,23 +1377,12 @@ def test_blended_publishing_averages_the_carried_pose_with_the_filter_s():
     the filter's (6 cm / 1.7 deg off) are averaged, the filter's weight growing with the
     travel since the confirmation: err = |bias| * w_filter, w_filter = sc^2 / (sc^2 + sf^2)
     with sc = base + per_m * travel; past ``publish_blend_max_m`` the filter's pose alone."""
-    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
-    grid = room_grid(6, 4, 0.05, boxes=boxes)
-    n = 30
-    truth = np.stack([np.linspace(1.6, 4.2, n), np.full(n, 1.9), np.linspace(0.0, 0.3, n)],
-                     axis=1)  # 9 cm per scan
-    bias = np.array([0.05, -0.03, 0.03])
     confident = [0, 5, 10]
-    loc = ScriptedLocalizer(truth, confident_at=confident, bias=bias)
-    fusion = FusionConfig(publish_blend=True, publish_blend_base_std_m=0.02,
-                          publish_blend_odom_std_per_m=0.1, publish_blend_filter_std_m=0.05,
-                          publish_blend_max_m=1.0, use_scan_matcher=False,
-                          absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0)
-    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
-    stack.begin_run(1)
-    scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
-                       odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
-    out = [stack.step(s) for s in scans]
+    truth, bias, out = _publishing_run(
+        FusionConfig(publish_blend=True, publish_blend_base_std_m=0.02,
+                     publish_blend_odom_std_per_m=0.1, publish_blend_filter_std_m=0.05,
+                     publish_blend_max_m=1.0, use_scan_matcher=False,
+                     absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0), confident)
     assert [i for i, o in enumerate(out) if o.gatmo_pose_verified] == confident
     published = np.array([o.pose_xytheta for o in out])
     err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
