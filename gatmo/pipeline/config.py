@@ -121,8 +121,9 @@ def sim_stack_config():
     # for up to 6 m, not published alone for 0.5 m and then dropped for the filter's
     # (docs/experiments.md, fifty-ninth session): full-stack ATE 0.095 -> 0.091 m (400-419,
     # lower on 20 of 20 seeds), 0.091 -> 0.087 m (100-109, 10 of 10), before anything moved
-    # 0.031 -> 0.028 m; Intel 0.164 -> 0.159 m, ACES 0.084 -> 0.070 m, MIT CSAIL 0.064 ->
-    # 0.065 m (demo configuration). GATMO is handed the same poses
+    # 0.031 -> 0.028 m; real logs (demo configuration, 0.1 m per metre for their wheels)
+    # Intel 0.164 -> 0.159 m, ACES 0.084 -> 0.071 m, MIT CSAIL the same. GATMO is handed the
+    # same poses
     cfg.fusion.publish_blend = True
     return cfg
 
