@@ -83,29 +83,27 @@ class FusionConfig(GatmoModel):
     localizer (0.199 against 0.196 m ATE). See docs/experiments.md.
 
     ``publish_pose``: the pose the stack reports. ``aligned`` (default; needs GATMO and
-    ``align_to_map``): the pose the scan-to-map alignment confirmed on the last scan it
-    confirmed with at least ``publish_min_tight_fraction`` of its points within
-    ``align_tight_m`` of a map edge (a confirmed but loose fit can be a wrong local one: the
-    demo's run 2 starts 0.33 m off and such a fit 0.42 m off), carried by the wheels'
-    odometry for at most ``publish_carry_m`` / ``publish_carry_deg``, else the filter's own
-    estimate (also when the carried pose strays more than ``max_offset_jump_m`` from it, or
-    the filter jumped). With ``publish_blend`` the carried pose is averaged with the filter's
-    estimate, each weighed by the inverse of its variance (the carried pose's grows with the
-    travel since it was confirmed), for up to ``publish_blend_max_m``: past 0.5 m the filter
-    alone is off by 0.11 m RMS on the rearranged halls, most of their ATE (docs/experiments.md,
-    fifty-ninth session). The particle mean trails a sharp likelihood field by a few cm; the
-    alignment puts a scan onto the map's edges. Against ``localizer`` (twenty-fourth
-    session): simulated halls before anything moved 0.060 -> 0.032 m ATE (seeds 100-109),
-    rearranged 0.150 -> 0.144 m (300-319, lower on 18 of 20), 0.153 -> 0.148 m (100-109) and
-    0.301 -> 0.295 m (400-419), offices 0.053 -> 0.043 m (lower on 5 of 5), Intel (demo
-    configuration) 0.183 -> 0.177 m, median 0.102 -> 0.080 m, relations 0.060 -> 0.053 m;
-    GATMO's work is unchanged (it is handed the same poses). With a filter never strictly
-    confident (AMCL's broad default field on the real logs) it is the
-    filter's pose. ``localizer``: the filter's own estimate, carried by odometry between its
-    updates, as AMCL publishes it. ``fused``: the matcher's pose re-anchored on the filter
-    (paper, Sec. IV-B), locally more precise (Intel relations 0.052 m / 0.65 deg against
-    0.061 m / 0.94 deg) but with larger errors between resets (ATE 7-11 % higher in
-    simulated offices where nothing moved).
+    ``align_to_map``): the pose the scan-to-map alignment confirmed on the last scan it confirmed
+    with at least ``publish_min_tight_fraction`` of its points within ``align_tight_m`` of a map
+    edge (a confirmed but loose fit can be a wrong local one: the demo's run 2 starts 0.33 m off and
+    such a fit 0.42 m off), carried by the wheels' odometry for at most ``publish_carry_m`` /
+    ``publish_carry_deg``, else the filter's own estimate (also when the carried pose strays more
+    than ``max_offset_jump_m`` from it, or the filter jumped). With ``publish_blend`` the carried
+    pose is averaged with the filter's estimate, each weighed by the inverse of its variance (the
+    carried pose's grows with the distance it has moved from where it was confirmed), up to
+    ``publish_blend_max_m`` away: past 0.5 m the filter alone is off by 0.11 m RMS on the rearranged
+    halls, most of their ATE (docs/experiments.md, fifty-ninth session). The particle mean trails a
+    sharp likelihood field by a few cm; the alignment puts a scan onto the map's edges. Against
+    ``localizer`` (twenty-fourth session): simulated halls before anything moved 0.060 -> 0.032 m
+    ATE (seeds 100-109), rearranged 0.150 -> 0.144 m (300-319, lower on 18 of 20), 0.153 -> 0.148 m
+    (100-109) and 0.301 -> 0.295 m (400-419), offices 0.053 -> 0.043 m (lower on 5 of 5), Intel
+    (demo configuration) 0.183 -> 0.177 m, median 0.102 -> 0.080 m, relations 0.060 -> 0.053 m;
+    GATMO's work is unchanged (it is handed the same poses). With a filter never strictly confident
+    (AMCL's broad default field on the real logs) it is the filter's pose. ``localizer``: the
+    filter's own estimate, carried by odometry between its updates, as AMCL publishes it. ``fused``:
+    the matcher's pose re-anchored on the filter (paper, Sec. IV-B), locally more precise (Intel
+    relations 0.052 m / 0.65 deg against 0.061 m / 0.94 deg) but with larger errors between resets
+    (ATE 7-11 % higher in simulated offices where nothing moved).
 
     ``relocalize`` (off by default; on in the simulated halls' configuration,
     ``gatmo.pipeline.config.sim_stack_config``, since the twenty-fifth session; needs GATMO's
@@ -204,21 +202,22 @@ class FusionConfig(GatmoModel):
         False, description="with publish_pose aligned: the last tightly confirmed pose carried "
         "by odometry is not published as it is but averaged with the filter's estimate, each "
         "weighed by the inverse of its variance: the carried pose's standard deviation is "
-        "publish_blend_base_std_m plus publish_blend_odom_std_per_m per metre travelled since "
-        "it was confirmed, the filter's publish_blend_filter_std_m; it is carried for up to "
+        "publish_blend_base_std_m plus publish_blend_odom_std_per_m per metre it has moved "
+        "(by the wheels, in a straight line) from where it was confirmed, the filter's "
+        "publish_blend_filter_std_m; it is carried while it has moved at most "
         "publish_blend_max_m (publish_carry_m / _deg do not apply)")
     publish_blend_base_std_m: float = Field(
         0.02, gt=0, description="see publish_blend: the confirmed pose's own error [m]")
     publish_blend_odom_std_per_m: float = Field(
-        0.05, ge=0, description="see publish_blend: the carried pose's error grown per metre of "
-        "the wheels' travel [m/m]")
+        0.05, ge=0, description="see publish_blend: the carried pose's error grown per metre it "
+        "has moved from where it was confirmed [m/m]")
     publish_blend_filter_std_m: float = Field(
         0.06, gt=0, description="see publish_blend: the filter's error where the alignment did "
         "not confirm a pose [m] (its particle spread says less: near moved furniture it is "
         "confident and off)")
     publish_blend_max_m: float = Field(
-        6.0, ge=0, description="see publish_blend: beyond this travel since the last confirmed "
-        "pose, the filter's estimate is published")
+        6.0, ge=0, description="see publish_blend: once the carried pose has moved farther than "
+        "this from where it was confirmed, the filter's estimate is published")
     publish_min_tight_fraction: float = Field(
         0.8, ge=0, le=1, description="with publish_pose aligned: a pose the alignment confirmed "
         "is published only if at least this fraction of its points lie within align_tight_m of "
@@ -1164,11 +1163,11 @@ class LocalizationStack:
             return loc_pose
         a_pose, a_odom = self._published_anchor
         d = relative(a_odom, odom)
-        travel_m = float(np.hypot(d[0], d[1]))
+        moved_m = float(np.hypot(d[0], d[1]))  # from where it was confirmed, not the path
         if f.publish_blend:
-            beyond = travel_m > f.publish_blend_max_m
+            beyond = moved_m > f.publish_blend_max_m
         else:
-            beyond = travel_m > f.publish_carry_m or abs(d[2]) > np.radians(f.publish_carry_deg)
+            beyond = moved_m > f.publish_carry_m or abs(d[2]) > np.radians(f.publish_carry_deg)
         if beyond:
             self._published_anchor = None
             return loc_pose
@@ -1178,7 +1177,7 @@ class LocalizationStack:
         if not f.publish_blend:
             return carried  # compose() wraps the heading
         return blend_poses(carried, loc_pose,
-                           f.publish_blend_base_std_m + f.publish_blend_odom_std_per_m * travel_m,
+                           f.publish_blend_base_std_m + f.publish_blend_odom_std_per_m * moved_m,
                            f.publish_blend_filter_std_m)
 
     def end_run(self) -> list:
