@@ -623,7 +623,7 @@ def blend_poses(a_xytheta: np.ndarray, b_xytheta: np.ndarray, std_a_m: float,
     a = np.asarray(a_xytheta, dtype=float)
     b = np.asarray(b_xytheta, dtype=float)
     d = a - b
-    d[2] = np.arctan2(np.sin(d[2]), np.cos(d[2]))
+    d[2] = wrap_angle(d[2])
     return _wrapped(b + w * d)
 
 
