@@ -236,6 +236,12 @@ class FusionConfig(GatmoModel):
     absence_max_std_theta_deg: float = Field(
         3.0, description="the bound of GATMO's stricter test on the localizer's heading "
         "standard deviation (see absence_max_std_xy_m)")
+    tight_between_updates: bool = Field(
+        False, description="between the filter's updates (it weighs a scan every "
+        "update_min_d of travel), while its last estimate passes GATMO's strict test, GATMO is "
+        "handed the stack's pose where the scan-to-map alignment confirms it tightly (at least "
+        "publish_min_tight_fraction of the points within align_tight_m of a map edge), as "
+        "verified; needs align_to_map")
     confident_for_m: float = Field(
         0.0, description="travel of the stack's pose since the localizer last passed the reset "
         "test (reset_max_std_*) within which GATMO is still handed that pose as trusted, though "
@@ -1017,7 +1023,12 @@ class LocalizationStack:
             if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed is not None
                     and self.fusion.settle_until_confirmed and self.fusion.align_to_map):
                 self._settle_after_restart(pose, scan)
-            pose_ok = pose_ok and self._settle_left_m <= 0.0
+            # tight_between_updates: a scan the filter did not weigh, its last estimate
+            # strictly confident, is handed over only if the alignment confirms it tightly
+            tight_only = (not pose_ok and self.fusion.tight_between_updates
+                          and self.fusion.align_to_map and self._last_precise
+                          and not getattr(est, "updated", True))
+            pose_ok = (pose_ok or tight_only) and self._settle_left_m <= 0.0
             if pose_ok and self._anchor_disagrees(anchor_est, loc_pose):
                 pose_ok = False
                 self.anchor_gated += 1
@@ -1027,6 +1038,9 @@ class LocalizationStack:
                 map_pose, pose_ok = self._map_aligner().refine(pose, scan)
                 verified = self._aligner.last_verified
                 align_outcome = self._aligner.last_outcome
+                if tight_only and not (verified and self._aligner.last_tight_fraction
+                                       >= self.fusion.publish_min_tight_fraction):
+                    map_pose, pose_ok, verified = pose, False, False
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
