@@ -236,12 +236,13 @@ class FusionConfig(GatmoModel):
     absence_max_std_theta_deg: float = Field(
         3.0, description="the bound of GATMO's stricter test on the localizer's heading "
         "standard deviation (see absence_max_std_xy_m)")
-    tight_between_updates: bool = Field(
-        False, description="between the filter's updates (it weighs a scan every "
+    tight_between_updates: Literal["off", "absence", "all"] = Field(
+        "off", description="between the filter's updates (it weighs a scan every "
         "update_min_d of travel), while its last estimate passes GATMO's strict test, GATMO is "
         "handed the stack's pose where the scan-to-map alignment confirms it tightly (at least "
         "publish_min_tight_fraction of the points within align_tight_m of a map edge), as "
-        "verified; needs align_to_map")
+        "verified: absence, as evidence of absence and presence only (its returns feed no "
+        "track); all, as any trusted scan. Needs align_to_map")
     confident_for_m: float = Field(
         0.0, description="travel of the stack's pose since the localizer last passed the reset "
         "test (reset_max_std_*) within which GATMO is still handed that pose as trusted, though "
@@ -1025,7 +1026,7 @@ class LocalizationStack:
                 self._settle_after_restart(pose, scan)
             # tight_between_updates: a scan the filter did not weigh, its last estimate
             # strictly confident, is handed over only if the alignment confirms it tightly
-            tight_only = (not pose_ok and self.fusion.tight_between_updates
+            tight_only = (not pose_ok and self.fusion.tight_between_updates != "off"
                           and self.fusion.align_to_map and self._last_precise
                           and not getattr(est, "updated", True))
             pose_ok = (pose_ok or tight_only) and self._settle_left_m <= 0.0
@@ -1043,8 +1044,10 @@ class LocalizationStack:
                     map_pose, pose_ok, verified = pose, False, False
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
+            kw = ({"track": False} if tight_only and pose_ok
+                  and self.fusion.tight_between_updates == "absence" else {})
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
-                                        stamp_s=scan.stamp_s, pose_verified=verified)
+                                        stamp_s=scan.stamp_s, pose_verified=verified, **kw)
             changed = self._apply_map_changes()
             if changed:
                 self._edges = None

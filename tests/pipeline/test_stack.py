@@ -187,6 +187,7 @@ class RecordingMapper:
     def __init__(self, grid=None):
         self.trusted = []
         self.verified = []
+        self.tracked = []
         self._grid = grid if grid is not None else room_grid(12, 6, 0.05)
 
     def begin_run(self, run_id):
@@ -195,6 +196,7 @@ class RecordingMapper:
     def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
         self.trusted.append(pose_confident)
         self.verified.append(pose_verified)
+        self.tracked.append(track)
         return []
 
     def pop_map_changes(self):
@@ -1408,7 +1410,8 @@ class EveryOtherLocalizer(ScriptedLocalizer):
         return est
 
 
-@pytest.mark.parametrize("shift_m, between", [(0.0, True), (0.0, False), (0.12, True)])
+@pytest.mark.parametrize("shift_m, between", [(0.0, "all"), (0.0, "absence"), (0.0, "off"),
+                                              (0.12, "all")])
 def test_scans_between_the_filters_updates_reach_gatmo_where_the_map_fits_them_tightly(
         shift_m, between):
     """``tight_between_updates``: the scans the filter does not weigh reach GATMO, as
@@ -1429,6 +1432,9 @@ def test_scans_between_the_filters_updates_reach_gatmo_where_the_map_fits_them_t
     for s in scans:
         stack.step(s)
     assert mapper.trusted[0::2] == [True] * 5 and mapper.verified[0::2] == [True] * 5
-    handed = between and shift_m == 0.0
+    handed = between != "off" and shift_m == 0.0
     assert mapper.trusted[1::2] == [handed] * 5
     assert mapper.verified[1::2] == [handed] * 5
+    # with "absence" those scans feed no track
+    assert mapper.tracked[0::2] == [True] * 5
+    assert mapper.tracked[1::2] == [between != "absence"] * 5
