@@ -236,7 +236,7 @@ class FusionConfig(GatmoModel):
     absence_max_std_theta_deg: float = Field(
         3.0, description="the bound of GATMO's stricter test on the localizer's heading "
         "standard deviation (see absence_max_std_xy_m)")
-    tight_between_updates: Literal["off", "absence", "all"] = Field(
+    tight_between_updates: Literal["off", "publish", "absence", "all"] = Field(
         "off", description="between the filter's updates (it weighs a scan every "
         "update_min_d of travel), while its last estimate passes GATMO's strict test, GATMO is "
         "handed the stack's pose where the scan-to-map alignment confirms it tightly (at least "
@@ -1013,6 +1013,7 @@ class LocalizationStack:
         events: list = []
         changed = False
         gatmo_pose = None
+        publish_only = None  # tight_between_updates publish: a confirmed pose GATMO is not given
         verified = False
         align_outcome = None
         if self.mapper is not None:
@@ -1042,6 +1043,10 @@ class LocalizationStack:
                 if tight_only and not (verified and self._aligner.last_tight_fraction
                                        >= self.fusion.publish_min_tight_fraction):
                     map_pose, pose_ok, verified = pose, False, False
+                if tight_only and pose_ok and self.fusion.tight_between_updates == "publish":
+                    # published (below), not handed to GATMO
+                    publish_only = np.array(map_pose, dtype=float)
+                    map_pose, pose_ok, verified = pose, False, False
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
             kw = ({"track": False} if tight_only and pose_ok
@@ -1061,7 +1066,8 @@ class LocalizationStack:
         elif self.fusion.publish_pose == "aligned":
             tight = (align_outcome == "confirmed" and self._aligner.last_tight_fraction
                      >= self.fusion.publish_min_tight_fraction)
-            published = self._aligned_pose(published, odom, gatmo_pose if tight else None)
+            confirmed = gatmo_pose if gatmo_pose is not None else publish_only
+            published = self._aligned_pose(published, odom, confirmed if tight else None)
         if self.anchor is not None and self.fusion.publish_anchor_when_apart:
             # the sharp filter slides onto moved furniture before the anchor test restarts it
             # (docs/experiments.md, forty-seventh session): report the anchor meanwhile
