@@ -236,13 +236,6 @@ class FusionConfig(GatmoModel):
     absence_max_std_theta_deg: float = Field(
         3.0, description="the bound of GATMO's stricter test on the localizer's heading "
         "standard deviation (see absence_max_std_xy_m)")
-    tight_between_updates: Literal["off", "publish", "absence", "all"] = Field(
-        "off", description="between the filter's updates (it weighs a scan every "
-        "update_min_d of travel), while its last estimate passes GATMO's strict test, GATMO is "
-        "handed the stack's pose where the scan-to-map alignment confirms it tightly (at least "
-        "publish_min_tight_fraction of the points within align_tight_m of a map edge), as "
-        "verified: absence, as evidence of absence and presence only (its returns feed no "
-        "track); all, as any trusted scan. Needs align_to_map")
     confident_for_m: float = Field(
         0.0, description="travel of the stack's pose since the localizer last passed the reset "
         "test (reset_max_std_*) within which GATMO is still handed that pose as trusted, though "
@@ -1013,7 +1006,6 @@ class LocalizationStack:
         events: list = []
         changed = False
         gatmo_pose = None
-        publish_only = None  # tight_between_updates publish: a confirmed pose GATMO is not given
         verified = False
         align_outcome = None
         if self.mapper is not None:
@@ -1025,12 +1017,7 @@ class LocalizationStack:
             if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed is not None
                     and self.fusion.settle_until_confirmed and self.fusion.align_to_map):
                 self._settle_after_restart(pose, scan)
-            # tight_between_updates: a scan the filter did not weigh, its last estimate
-            # strictly confident, is handed over only if the alignment confirms it tightly
-            tight_only = (not pose_ok and self.fusion.tight_between_updates != "off"
-                          and self.fusion.align_to_map and self._last_precise
-                          and not getattr(est, "updated", True))
-            pose_ok = (pose_ok or tight_only) and self._settle_left_m <= 0.0
+            pose_ok = pose_ok and self._settle_left_m <= 0.0
             if pose_ok and self._anchor_disagrees(anchor_est, loc_pose):
                 pose_ok = False
                 self.anchor_gated += 1
@@ -1040,19 +1027,10 @@ class LocalizationStack:
                 map_pose, pose_ok = self._map_aligner().refine(pose, scan)
                 verified = self._aligner.last_verified
                 align_outcome = self._aligner.last_outcome
-                if tight_only and not (verified and self._aligner.last_tight_fraction
-                                       >= self.fusion.publish_min_tight_fraction):
-                    map_pose, pose_ok, verified = pose, False, False
-                if tight_only and pose_ok and self.fusion.tight_between_updates == "publish":
-                    # published (below), not handed to GATMO
-                    publish_only = np.array(map_pose, dtype=float)
-                    map_pose, pose_ok, verified = pose, False, False
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
-            kw = ({"track": False} if tight_only and pose_ok
-                  and self.fusion.tight_between_updates == "absence" else {})
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
-                                        stamp_s=scan.stamp_s, pose_verified=verified, **kw)
+                                        stamp_s=scan.stamp_s, pose_verified=verified)
             changed = self._apply_map_changes()
             if changed:
                 self._edges = None
@@ -1066,8 +1044,7 @@ class LocalizationStack:
         elif self.fusion.publish_pose == "aligned":
             tight = (align_outcome == "confirmed" and self._aligner.last_tight_fraction
                      >= self.fusion.publish_min_tight_fraction)
-            confirmed = gatmo_pose if gatmo_pose is not None else publish_only
-            published = self._aligned_pose(published, odom, confirmed if tight else None)
+            published = self._aligned_pose(published, odom, gatmo_pose if tight else None)
         if self.anchor is not None and self.fusion.publish_anchor_when_apart:
             # the sharp filter slides onto moved furniture before the anchor test restarts it
             # (docs/experiments.md, forty-seventh session): report the anchor meanwhile

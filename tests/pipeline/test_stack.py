@@ -187,7 +187,6 @@ class RecordingMapper:
     def __init__(self, grid=None):
         self.trusted = []
         self.verified = []
-        self.tracked = []
         self._grid = grid if grid is not None else room_grid(12, 6, 0.05)
 
     def begin_run(self, run_id):
@@ -196,7 +195,6 @@ class RecordingMapper:
     def update(self, pose, scan, *, pose_confident, stamp_s, pose_verified=True, track=True):
         self.trusted.append(pose_confident)
         self.verified.append(pose_verified)
-        self.tracked.append(track)
         return []
 
     def pop_map_changes(self):
@@ -1397,44 +1395,3 @@ def test_blended_publishing_averages_the_carried_pose_with_the_filter_s():
         assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
     assert np.all(np.diff(err[11:22]) > 0)  # the filter's weight grows with the travel
     np.testing.assert_allclose(published[22:], truth[22:] + bias, atol=1e-9)
-
-
-class EveryOtherLocalizer(ScriptedLocalizer):
-    """Confident at every scan, but weighs only every other one (``updated`` False between),
-    as a filter with update_min_d does."""
-
-    def update(self, odom, scan, withheld=None):
-        i = self.i
-        est = super().update(odom, scan, withheld)
-        est.updated = i % 2 == 0
-        return est
-
-
-@pytest.mark.parametrize("shift_m, between", [(0.0, "all"), (0.0, "absence"), (0.0, "off"),
-                                              (0.12, "all")])
-def test_scans_between_the_filters_updates_reach_gatmo_where_the_map_fits_them_tightly(
-        shift_m, between):
-    """``tight_between_updates``: the scans the filter does not weigh reach GATMO, as
-    verified, where the alignment confirms the stack's pose with most points on a map edge.
-    With every box 0.12 m east of the map the alignment still confirms the filter's updates
-    (loosely), but the scans between them stay out."""
-    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
-    grid = room_grid(6, 4, 0.05, boxes=boxes)
-    world = room_grid(6, 4, 0.05, boxes=[(a + shift_m, b, c + shift_m, d)
-                                         for a, b, c, d in boxes])
-    truth = np.array([[2.5 + 0.05 * i, 1.9, 0.0] for i in range(10)])
-    scans = [make_scan(world, p, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
-                       odom_pose_xytheta=p, stamp_s=0.1 * i) for i, p in enumerate(truth)]
-    mapper = RecordingMapper(grid)
-    stack = LocalizationStack(EveryOtherLocalizer(truth, range(10)), None, mapper,
-                              FusionConfig(mask_unexplained=False, tight_between_updates=between))
-    stack.begin_run(1)
-    for s in scans:
-        stack.step(s)
-    assert mapper.trusted[0::2] == [True] * 5 and mapper.verified[0::2] == [True] * 5
-    handed = between != "off" and shift_m == 0.0
-    assert mapper.trusted[1::2] == [handed] * 5
-    assert mapper.verified[1::2] == [handed] * 5
-    # with "absence" those scans feed no track
-    assert mapper.tracked[0::2] == [True] * 5
-    assert mapper.tracked[1::2] == [between != "absence"] * 5
