@@ -215,6 +215,11 @@ class FusionConfig(GatmoModel):
         0.06, gt=0, description="see publish_blend: the filter's error where the alignment did "
         "not confirm a pose [m] (its particle spread says less: near moved furniture it is "
         "confident and off)")
+    publish_blend_suspect_std_m: float = Field(
+        0.06, gt=0, description="see publish_blend: the filter's error [m] while the last "
+        "scan-to-map alignment (on the run's latest trusted scan) did not confirm its pose "
+        "(contradicts, not_converged, degenerate, low_fitness); publish_blend_filter_std_m "
+        "after a confirmation")
     publish_blend_max_m: float = Field(
         6.0, ge=0, description="see publish_blend: once the carried pose has moved farther than "
         "this from where it was confirmed, the filter's estimate is published")
@@ -700,6 +705,8 @@ class LocalizationStack:
             self._takes_withheld = False
         # publish_pose aligned: the last confirmed (map pose, odometry pose) it is carried from
         self._published_anchor: tuple[np.ndarray, np.ndarray] | None = None
+        # the run's last alignment outcome (publish_blend_suspect_std_m); None: none yet
+        self._last_align_outcome: str | None = None
         # relocalize: the search (rebuilt when the map changed), the last found pose with the
         # odometry it was found at and how many updates in a row agreed, and the restarts
         self._reloc: Relocalizer | None = None
@@ -723,6 +730,7 @@ class LocalizationStack:
         self._settle_left_m = 0.0
         self._settle_confirmed = None
         self._published_anchor = None
+        self._last_align_outcome: str | None = None
         self._reloc_found = None
         self._reloc_stale = True
         self._edges = None
@@ -1038,6 +1046,8 @@ class LocalizationStack:
                 self._aligner.set_grid(*self._map_edges())
             self._reloc_stale = self._reloc_stale or changed
         self.n_scans += 1
+        if align_outcome is not None:
+            self._last_align_outcome = align_outcome
         published = _wrapped(loc_pose)
         if self.fusion.publish_pose == "fused":
             published = pose
@@ -1176,9 +1186,12 @@ class LocalizationStack:
             return loc_pose
         if not f.publish_blend:
             return carried  # compose() wraps the heading
+        suspect = self._last_align_outcome in ("contradicts", "not_converged", "degenerate",
+                                               "low_fitness")
         return blend_poses(carried, loc_pose,
                            f.publish_blend_base_std_m + f.publish_blend_odom_std_per_m * moved_m,
-                           f.publish_blend_filter_std_m)
+                           f.publish_blend_suspect_std_m if suspect
+                           else f.publish_blend_filter_std_m)
 
     def end_run(self) -> list:
         """Close a log: GATMO adds dominant chairs in Gamma to the map (paper, Sec. V)."""
