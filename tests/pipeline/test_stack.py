@@ -694,17 +694,31 @@ class _MapOnly:
         return []
 
 
-def _publishing_run(fusion: FusionConfig, confident: list[int]):
+class _OffAtLocalizer(ScriptedLocalizer):
+    """A :class:`ScriptedLocalizer` off by a further ``off_at[i]`` (3,) on scan i."""
+
+    def __init__(self, truth, confident_at, bias, off_at):
+        super().__init__(truth, confident_at, bias)
+        self.off_at = off_at
+
+    def update(self, odom, scan, withheld=None):
+        i = self.i
+        est = super().update(odom, scan, withheld)
+        est.pose_xytheta = est.pose_xytheta + np.asarray(self.off_at.get(i, np.zeros(3)))
+        return est
+
+
+def _publishing_run(fusion: FusionConfig, confident: list[int], off_at: dict | None = None):
     """(truth (30, 3), the localizer's bias (3,), the steps): a robot driving 9 cm per scan
-    through a room of eight boxes, the scripted localizer off by the bias and strictly
-    confident on the scans ``confident``, odometry exact."""
+    through a room of eight boxes, the scripted localizer off by the bias (and by ``off_at[i]``
+    more on scan i) and strictly confident on the scans ``confident``, odometry exact."""
     boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
     grid = room_grid(6, 4, 0.05, boxes=boxes)
     n = 30
     truth = np.stack([np.linspace(1.6, 4.2, n), np.full(n, 1.9), np.linspace(0.0, 0.3, n)],
                      axis=1)
     bias = np.array([0.05, -0.03, 0.03])
-    loc = ScriptedLocalizer(truth, confident_at=confident, bias=bias)
+    loc = _OffAtLocalizer(truth, confident, bias, off_at or {})
     stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
     stack.begin_run(1)
     scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
@@ -1395,3 +1409,27 @@ def test_blended_publishing_averages_the_carried_pose_with_the_filter_s():
         assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
     assert np.all(np.diff(err[11:22]) > 0)  # the filter's weight grows with the travel
     np.testing.assert_allclose(published[22:], truth[22:] + bias, atol=1e-9)
+
+
+@pytest.mark.parametrize("suspect_std_m", [0.05, 0.2])
+def test_the_blend_trusts_the_filter_less_after_the_alignment_contradicted_it(suspect_std_m):
+    """``publish_blend_suspect_std_m``: on scan 12 the filter is strictly confident and 0.3 m
+    off; the alignment from there moves it back by more than ``align_max_correction_m``
+    (contradicts). Until the next confirmation the blend weighs the filter with the suspect
+    deviation: err = |bias| * sc^2 / (sc^2 + ss^2); with ss = publish_blend_filter_std_m the
+    same as before."""
+    truth, bias, out = _publishing_run(
+        FusionConfig(publish_blend=True, publish_blend_base_std_m=0.02,
+                     publish_blend_odom_std_per_m=0.1, publish_blend_filter_std_m=0.05,
+                     publish_blend_suspect_std_m=suspect_std_m, publish_blend_max_m=3.0,
+                     use_scan_matcher=False, absence_max_std_xy_m=0.1,
+                     absence_max_std_theta_deg=3.0),
+        [0, 5, 10, 12], off_at={12: (0.0, 0.3, 0.0)})
+    assert out[12].align_outcome in ("contradicts", "not_converged")
+    published = np.array([o.pose_xytheta for o in out])
+    err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
+    step_m = np.hypot(*(truth[1, :2] - truth[0, :2]))
+    for i in range(13, 22):
+        sc = 0.02 + 0.1 * step_m * (i - 10)
+        w_filter = sc**2 / (sc**2 + suspect_std_m**2)
+        assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
