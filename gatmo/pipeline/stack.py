@@ -92,7 +92,9 @@ class FusionConfig(GatmoModel):
     pose is averaged with the filter's estimate, each weighed by the inverse of its variance (the
     carried pose's grows with the distance it has moved from where it was confirmed), up to
     ``publish_blend_max_m`` away: past 0.5 m the filter alone is off by 0.11 m RMS on the rearranged
-    halls, most of their ATE (docs/experiments.md, fifty-ninth session). The particle mean trails a
+    halls, most of their ATE (docs/experiments.md, fifty-ninth session). While the run's last
+    alignment did not confirm the filter, the filter weighs ``publish_blend_suspect_std_m``
+    instead of ``publish_blend_filter_std_m`` (sixtieth session). The particle mean trails a
     sharp likelihood field by a few cm; the alignment puts a scan onto the map's edges. Against
     ``localizer`` (twenty-fourth session): simulated halls before anything moved 0.060 -> 0.032 m
     ATE (seeds 100-109), rearranged 0.150 -> 0.144 m (300-319, lower on 18 of 20), 0.153 -> 0.148 m
