@@ -419,6 +419,10 @@ class FusionConfig(GatmoModel):
 #: (below ``align_min_fitness``), ``few_points`` (under 20 after downsampling) or ``no_map``
 ALIGN_OUTCOMES = ("confirmed", "contradicts", "not_converged", "degenerate", "low_fitness",
                   "few_points", "no_map")
+#: the alignment outcomes after which the published blend trusts the filter less
+#: (publish_blend_suspect_std_m): the filter's median error after each is 0.075-0.15 m on the
+#: rearranged halls, 0.05 m after a confirmation (docs/experiments.md, sixtieth session)
+SUSPECT_OUTCOMES = ("contradicts", "not_converged", "degenerate", "low_fitness")
 
 
 def _edge_points(grid: OccupancyGrid) -> np.ndarray:
@@ -732,7 +736,7 @@ class LocalizationStack:
         self._settle_left_m = 0.0
         self._settle_confirmed = None
         self._published_anchor = None
-        self._last_align_outcome: str | None = None
+        self._last_align_outcome = None
         self._reloc_found = None
         self._reloc_stale = True
         self._edges = None
@@ -1188,8 +1192,7 @@ class LocalizationStack:
             return loc_pose
         if not f.publish_blend:
             return carried  # compose() wraps the heading
-        suspect = self._last_align_outcome in ("contradicts", "not_converged", "degenerate",
-                                               "low_fitness")
+        suspect = self._last_align_outcome in SUSPECT_OUTCOMES
         return blend_poses(carried, loc_pose,
                            f.publish_blend_base_std_m + f.publish_blend_odom_std_per_m * moved_m,
                            f.publish_blend_suspect_std_m if suspect
