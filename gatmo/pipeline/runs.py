@@ -198,6 +198,8 @@ def make_full_stack(cfg, mapper, seed: int, initial_pose,
         cfg.fusion,
         loc_grid=loc_grid,
         anchor=anchor,
+        initial_pose_xytheta=initial_pose,
+        initial_std_m=float(np.sqrt(max(cfg.amcl.initial_cov_xx_m2, cfg.amcl.initial_cov_yy_m2))),
     )
 
 

@@ -222,6 +222,11 @@ class FusionConfig(GatmoModel):
         "scan-to-map alignment (on the run's latest trusted scan) did not confirm its pose "
         "(contradicts, not_converged, degenerate, low_fitness); publish_blend_filter_std_m "
         "after a confirmation")
+    publish_blend_from_start: bool = Field(
+        False, description="see publish_blend: until a run's first tight confirmation, the pose "
+        "the run was started from (a given initial pose), carried by the wheels, is averaged "
+        "with the filter's as a confirmed one is, its own error the initial cloud's standard "
+        "deviation instead of publish_blend_base_std_m")
     publish_blend_max_m: float = Field(
         6.0, ge=0, description="see publish_blend: once the carried pose has moved farther than "
         "this from where it was confirmed, the filter's estimate is published")
@@ -670,7 +675,8 @@ class LocalizationStack:
     """
 
     def __init__(self, localizer, matcher=None, mapper=None, fusion: FusionConfig | None = None,
-                 loc_grid: OccupancyGrid | None = None, anchor=None):
+                 loc_grid: OccupancyGrid | None = None, anchor=None,
+                 initial_pose_xytheta: np.ndarray | None = None, initial_std_m: float = 0.1):
         self.localizer = localizer
         # fusion.anchor_filter: the second filter (flat sensor model, same map, raw scans), and
         # the localizer's updates in a row on which the two have parted
@@ -709,8 +715,15 @@ class LocalizationStack:
                 p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
         except (TypeError, ValueError):  # no update (a stand-in stepped otherwise)
             self._takes_withheld = False
-        # publish_pose aligned: the last confirmed (map pose, odometry pose) it is carried from
-        self._published_anchor: tuple[np.ndarray, np.ndarray] | None = None
+        # publish_pose aligned: the last confirmed (map pose, odometry pose, its own standard
+        # deviation [m]) it is carried from
+        self._published_anchor: tuple[np.ndarray, np.ndarray, float] | None = None
+        # publish_blend_from_start: the pose (map frame) each run is started from and its
+        # standard deviation [m]; None: not given (global localization)
+        self.initial_pose_xytheta = (None if initial_pose_xytheta is None
+                                     else _wrapped(initial_pose_xytheta))
+        self.initial_std_m = float(initial_std_m)
+        self._first_scan = True
         # the run's last alignment outcome (publish_blend_suspect_std_m); None: none yet
         self._last_align_outcome: str | None = None
         # relocalize: the search (rebuilt when the map changed), the last found pose with the
@@ -736,6 +749,7 @@ class LocalizationStack:
         self._settle_left_m = 0.0
         self._settle_confirmed = None
         self._published_anchor = None
+        self._first_scan = True
         self._last_align_outcome = None
         self._reloc_found = None
         self._reloc_stale = True
@@ -1055,6 +1069,12 @@ class LocalizationStack:
         if align_outcome is not None:
             self._last_align_outcome = align_outcome
         published = _wrapped(loc_pose)
+        if (self._first_scan and self.initial_pose_xytheta is not None
+                and self.fusion.publish_blend_from_start and self.fusion.publish_blend):
+            # the run's start: the given pose, carried until the first tight confirmation
+            self._published_anchor = (self.initial_pose_xytheta.copy(), odom.copy(),
+                                      self.initial_std_m)
+        self._first_scan = False
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
@@ -1172,12 +1192,13 @@ class LocalizationStack:
         ``max_offset_jump_m`` of the filter's ``loc_pose``, else ``loc_pose``."""
         f = self.fusion
         if confirmed is not None:
-            self._published_anchor = (_wrapped(confirmed), odom.copy())
+            self._published_anchor = (_wrapped(confirmed), odom.copy(),
+                                      f.publish_blend_base_std_m)
             return self._published_anchor[0]
         if self._published_anchor is None or self._settle_left_m > 0.0:
             self._published_anchor = None  # none yet, or the filter jumped since
             return loc_pose
-        a_pose, a_odom = self._published_anchor
+        a_pose, a_odom, a_std_m = self._published_anchor
         d = relative(a_odom, odom)
         moved_m = float(np.hypot(d[0], d[1]))  # from where it was confirmed, not the path
         if f.publish_blend:
@@ -1194,7 +1215,7 @@ class LocalizationStack:
             return carried  # compose() wraps the heading
         suspect = self._last_align_outcome in SUSPECT_OUTCOMES
         return blend_poses(carried, loc_pose,
-                           f.publish_blend_base_std_m + f.publish_blend_odom_std_per_m * moved_m,
+                           a_std_m + f.publish_blend_odom_std_per_m * moved_m,
                            f.publish_blend_suspect_std_m if suspect
                            else f.publish_blend_filter_std_m)
 

@@ -708,7 +708,8 @@ class _OffAtLocalizer(ScriptedLocalizer):
         return est
 
 
-def _publishing_run(fusion: FusionConfig, confident: list[int], off_at: dict | None = None):
+def _publishing_run(fusion: FusionConfig, confident: list[int], off_at: dict | None = None,
+                    **stack_kw):
     """(truth (30, 3), the localizer's bias (3,), the steps): a robot driving 9 cm per scan
     through a room of eight boxes, the scripted localizer off by the bias (and by ``off_at[i]``
     more on scan i) and strictly confident on the scans ``confident``, odometry exact."""
@@ -719,7 +720,9 @@ def _publishing_run(fusion: FusionConfig, confident: list[int], off_at: dict | N
                      axis=1)
     bias = np.array([0.05, -0.03, 0.03])
     loc = _OffAtLocalizer(truth, confident, bias, off_at or {})
-    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
+    if stack_kw.get("initial_pose_xytheta") == "truth":
+        stack_kw["initial_pose_xytheta"] = truth[0]
+    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion, **stack_kw)
     stack.begin_run(1)
     scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
                        odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
@@ -1433,3 +1436,29 @@ def test_the_blend_trusts_the_filter_less_after_the_alignment_contradicted_it(su
         sc = 0.02 + 0.1 * step_m * (i - 10)
         w_filter = sc**2 / (sc**2 + suspect_std_m**2)
         assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
+
+
+@pytest.mark.parametrize("from_start", [True, False])
+def test_a_run_publishes_its_given_start_pose_carried_until_the_first_confirmation(from_start):
+    """``publish_blend_from_start``: the stack is handed the run's true start pose with a
+    0.1 m deviation; until the first confirmed scan (10) the wheels carry it and the blend
+    averages it with the filter's (6 cm / 1.7 deg off): err = |bias| * sc^2 / (sc^2 + sf^2),
+    sc = 0.1 + per_m * travel. Without the option the filter's pose is published there."""
+    truth, bias, out = _publishing_run(
+        FusionConfig(publish_blend=True, publish_blend_base_std_m=0.02,
+                     publish_blend_odom_std_per_m=0.1, publish_blend_filter_std_m=0.05,
+                     publish_blend_from_start=from_start, use_scan_matcher=False,
+                     absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0),
+        [10], initial_pose_xytheta="truth", initial_std_m=0.1)
+    published = np.array([o.pose_xytheta for o in out])
+    err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
+    assert err[10] < 0.01  # the first confirmation
+    if not from_start:
+        np.testing.assert_allclose(published[:10], truth[:10] + bias, atol=1e-9)
+        return
+    step_m = np.hypot(*(truth[1, :2] - truth[0, :2]))
+    for i in range(10):
+        sc = 0.1 + 0.1 * step_m * i
+        w_filter = sc**2 / (sc**2 + 0.05**2)
+        assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
+    assert np.all(err[:4] < np.hypot(*bias[:2]) - 0.007)  # nearer than the filter alone
