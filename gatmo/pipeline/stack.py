@@ -672,6 +672,10 @@ class LocalizationStack:
             the base pose in the matcher's own frame, or None (localizer pose published as is).
         mapper: a :class:`gatmo.objects.mapper.GatmoMapper` or None (static map).
         fusion: reset thresholds.
+        initial_pose_xytheta: the pose (map frame, (3,)) each run is started from, or None
+            (global localization); with ``fusion.publish_blend_from_start`` it is published,
+            carried by the wheels, until the run's first tight confirmation.
+        initial_std_m: its position standard deviation [m] (the initial cloud's).
     """
 
     def __init__(self, localizer, matcher=None, mapper=None, fusion: FusionConfig | None = None,
