@@ -727,7 +727,6 @@ class LocalizationStack:
         self.initial_pose_xytheta = (None if initial_pose_xytheta is None
                                      else _wrapped(initial_pose_xytheta))
         self.initial_std_m = float(initial_std_m)
-        self._first_scan = True
         # the run's last alignment outcome (publish_blend_suspect_std_m); None: none yet
         self._last_align_outcome: str | None = None
         # relocalize: the search (rebuilt when the map changed), the last found pose with the
@@ -753,7 +752,6 @@ class LocalizationStack:
         self._settle_left_m = 0.0
         self._settle_confirmed = None
         self._published_anchor = None
-        self._first_scan = True
         self._last_align_outcome = None
         self._reloc_found = None
         self._reloc_stale = True
@@ -963,6 +961,12 @@ class LocalizationStack:
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)
         confident = is_confident(est, self.fusion)
         odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
+        if (self._last_loc is None and self.initial_pose_xytheta is not None
+                and self.fusion.publish_blend_from_start and self.fusion.publish_blend):
+            # the run's first scan: the given start pose, carried until the first tight
+            # confirmation (a restart of the filter drops it, as it drops a confirmed pose)
+            self._published_anchor = (self.initial_pose_xytheta.copy(), odom.copy(),
+                                      self.initial_std_m)
         if self._last_loc is not None:
             d_odom = relative(self._last_odom, odom)
             # the wait counts the wheels' travel: the jump itself is no travel
@@ -1073,12 +1077,6 @@ class LocalizationStack:
         if align_outcome is not None:
             self._last_align_outcome = align_outcome
         published = _wrapped(loc_pose)
-        if (self._first_scan and self.initial_pose_xytheta is not None
-                and self.fusion.publish_blend_from_start and self.fusion.publish_blend):
-            # the run's start: the given pose, carried until the first tight confirmation
-            self._published_anchor = (self.initial_pose_xytheta.copy(), odom.copy(),
-                                      self.initial_std_m)
-        self._first_scan = False
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
