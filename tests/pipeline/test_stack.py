@@ -1462,3 +1462,30 @@ def test_a_run_publishes_its_given_start_pose_carried_until_the_first_confirmati
         w_filter = sc**2 / (sc**2 + 0.05**2)
         assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
     assert np.all(err[:4] < np.hypot(*bias[:2]) - 0.007)  # nearer than the filter alone
+
+
+@pytest.mark.parametrize("tight_contradictions", [True, False])
+def test_a_tight_contradiction_is_published_in_place_of_the_filter_s_pose(
+        tight_contradictions):
+    """``publish_tight_contradictions``: on scan 12 the filter is strictly confident and
+    0.2 m off; the alignment from there moves it back onto the map's edges (all returns
+    tight), more than ``align_max_correction_m``: it contradicts the filter. With the option
+    that pose is published, within a centimetre of the truth, and carried on; GATMO is not
+    handed it either way. Without it the blend of scan 5's confirmation, carried 0.6 m, and
+    the filter is published, off by 4 cm there and by 1.5 cm or more on the next scans
+    (the filter is 6 cm off on those)."""
+    fusion = FusionConfig(publish_blend=True, publish_blend_base_std_m=0.02,
+                          publish_blend_odom_std_per_m=0.1, publish_blend_filter_std_m=0.05,
+                          publish_blend_suspect_std_m=0.15, publish_blend_max_m=3.0,
+                          publish_tight_contradictions=tight_contradictions,
+                          use_scan_matcher=False, absence_max_std_xy_m=0.1,
+                          absence_max_std_theta_deg=3.0)
+    truth, bias, out = _publishing_run(fusion, [0, 5, 12], off_at={12: (0.0, 0.2, 0.0)})
+    assert out[12].align_outcome == "contradicts"
+    assert out[12].gatmo_pose_xytheta is None and not out[12].gatmo_pose_verified
+    published = np.array([o.pose_xytheta for o in out])
+    err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
+    if tight_contradictions:
+        assert np.all(err[12:16] < 0.008)  # carried from scan 12 on
+    else:
+        assert err[12] > 0.03 and np.all(err[13:16] > 0.012)
