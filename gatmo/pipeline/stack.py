@@ -233,6 +233,17 @@ class FusionConfig(GatmoModel):
         "publish_min_tight_fraction of its points within align_tight_m of a map edge is "
         "published as a confirmed pose is (the filter, pulled by moved furniture, is the one "
         "off); GATMO is still not handed it")
+    restart_tight_contradictions: int = Field(
+        0, ge=0, description="start the localizer again (relocalize_std_*) at the pose the "
+        "scan-to-map alignment converged to once this many of its tight contradictions "
+        "(publish_tight_contradictions' test) in a row agree after odometry (within "
+        "restart_agree_m and restart_agree_deg); 0: never")
+    restart_agree_m: float = Field(
+        0.05, gt=0, description="see restart_tight_contradictions: the distance within which "
+        "two tight contradictions' poses agree after odometry")
+    restart_agree_deg: float = Field(
+        2.0, gt=0, description="see restart_tight_contradictions: the heading difference within "
+        "which two tight contradictions' poses agree after odometry")
     publish_blend_max_m: float = Field(
         6.0, ge=0, description="see publish_blend: once the carried pose has moved farther than "
         "this from where it was confirmed, the filter's estimate is published")
@@ -748,6 +759,9 @@ class LocalizationStack:
         # relocalizer; None: work them out again (the map changed)
         self._edges: tuple[OccupancyGrid, np.ndarray] | None = None
         self._reloc_found: tuple[np.ndarray, np.ndarray, int] | None = None
+        # restart_tight_contradictions: the last tight contradiction's pose, the odometry it
+        # was found at and how many in a row agreed
+        self._contradicted: tuple[np.ndarray, np.ndarray, int] | None = None
         # odometry at the last update, and the travel since the filter last fitted the map
         self._reloc_odom: np.ndarray | None = None
         self._reloc_travel_m = 0.0
@@ -765,6 +779,7 @@ class LocalizationStack:
         self._published_anchor = None
         self._last_align_outcome = None
         self._reloc_found = None
+        self._contradicted = None
         self._reloc_stale = True
         self._edges = None
         self._reloc_odom, self._reloc_travel_m = None, 0.0
@@ -1087,6 +1102,11 @@ class LocalizationStack:
         self.n_scans += 1
         if align_outcome is not None:
             self._last_align_outcome = align_outcome
+            restart = self._contradiction_restart(align_outcome, odom)
+            if restart is not None:
+                self._restart_at(restart, scan.stamp_s, loc_pose)
+                loc_pose = self._last_loc = restart
+                relocalized = True
         published = _wrapped(loc_pose)
         if self.fusion.publish_pose == "fused":
             published = pose
@@ -1216,6 +1236,33 @@ class LocalizationStack:
         if self._aligner.last_tight_fraction < f.publish_min_tight_fraction:
             return None
         return pose
+
+    def _contradiction_restart(self, align_outcome: str, odom: np.ndarray) -> np.ndarray | None:
+        """``restart_tight_contradictions``: the pose to start the localizer again at, on this
+        scan, or None. A tight contradiction's pose is 2 cm off (median) when the one before
+        agrees with it after odometry, the filter's 0.2 m (docs/experiments.md, sixty-first
+        session)."""
+        f = self.fusion
+        if (f.restart_tight_contradictions <= 0 or align_outcome == "not_converged"
+                or not callable(getattr(self.localizer, "set_initial_pose", None))):
+            return None  # (an alignment that did not converge says nothing either way)
+        if align_outcome != "contradicts" or (
+                self._aligner.last_tight_fraction < f.publish_min_tight_fraction):
+            self._contradicted = None
+            return None
+        found = np.asarray(self._aligner.last_aligned_pose_xytheta, dtype=float)
+        n = 1
+        if self._contradicted is not None:
+            prev, prev_odom, k = self._contradicted
+            d = relative(compose(prev, relative(prev_odom, odom)), found)
+            if (np.hypot(d[0], d[1]) <= f.restart_agree_m
+                    and abs(d[2]) <= np.radians(f.restart_agree_deg)):
+                n = k + 1
+        if n < f.restart_tight_contradictions or not _startable_at(self.localizer, found):
+            self._contradicted = (found, odom.copy(), n)
+            return None
+        self._contradicted = None
+        return _wrapped(found)
 
     def _aligned_pose(self, loc_pose: np.ndarray, odom: np.ndarray,
                       confirmed: np.ndarray | None) -> np.ndarray:

@@ -1489,3 +1489,53 @@ def test_a_tight_contradiction_is_published_in_place_of_the_filter_s_pose(
         assert np.all(err[12:16] < 0.008)  # carried from scan 12 on
     else:
         assert err[12] > 0.03 and np.all(err[13:16] > 0.012)
+
+
+class _RestartableOffLocalizer(ScriptedLocalizer):
+    """Scripted: off by ``bias`` until started again (``set_initial_pose``), then exact."""
+
+    def __init__(self, truth, confident_at, bias):
+        super().__init__(truth, confident_at=confident_at, bias=bias)
+        self.started = []
+
+    def set_initial_pose(self, pose_xytheta, cov):
+        self.started.append(np.array(pose_xytheta, dtype=float))
+        self.bias = np.zeros(3)
+
+
+@pytest.mark.parametrize("scans_in_a_row", [0, 2, 3])
+def test_agreeing_tight_contradictions_start_the_filter_again_at_the_aligned_pose(
+        scans_in_a_row):
+    """``restart_tight_contradictions``: the filter is strictly confident and 0.2 m off on
+    every scan; the alignment contradicts it each time with a tight fit, the poses agreeing
+    after odometry. After that many in a row the filter is started at the aligned pose
+    (within a centimetre of the truth), published from then on; GATMO, which is handed no
+    contradicted pose, waits as after any restart until three poses are confirmed. 0 never
+    starts it again."""
+    boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
+    grid = room_grid(6, 4, 0.05, boxes=boxes)
+    n = 8
+    truth = np.stack([np.linspace(1.6, 2.3, n), np.full(n, 1.9), np.zeros(n)], axis=1)
+    loc = _RestartableOffLocalizer(truth, range(n), bias=(0.0, 0.2, 0.0))
+    fusion = FusionConfig(use_scan_matcher=False, restart_tight_contradictions=scans_in_a_row,
+                          settle_until_confirmed=True, settle_confirmed_poses=3,
+                          absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0)
+    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion)
+    stack.begin_run(1)
+    out = [stack.step(make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi,
+                                max_range_m=8.0, odom_pose_xytheta=truth[i],
+                                stamp_s=float(i))) for i in range(n)]
+    outcomes = [o.align_outcome for o in out]
+    if scans_in_a_row == 0:
+        assert loc.started == [] and outcomes == ["contradicts"] * n
+        return
+    k = scans_in_a_row - 1
+    assert len(loc.started) == 1 and out[k].relocalized
+    assert np.hypot(*(loc.started[0][:2] - truth[k, :2])) < 0.01
+    assert outcomes[:k + 1] == ["contradicts"] * (k + 1)
+    # GATMO waits after the jump until the alignment has confirmed three poses
+    handed = [o.gatmo_pose_verified for o in out]
+    assert not any(handed[:k + 3]) and all(handed[k + 3:])
+    published = np.array([o.pose_xytheta for o in out])
+    assert np.all(np.hypot(*(published[k:, :2] - truth[k:, :2]).T) < 0.01)
+    assert stack.relocalizations[0][0] == float(k)
