@@ -169,7 +169,7 @@ class FusionConfig(GatmoModel):
     """
 
     # built, measured as no better than the defaults and left off, then removed (forty-second
-    # session, docs/experiments.md); a file naming one at its old default still loads
+    # session and later, docs/experiments.md); a file naming one at its old default still loads
     removed_options: ClassVar[dict[str, Any]] = {
         "settle_after_start_m": 0.0, "slide_check": False, "slide_window_m": 2.0,
         "slide_max_m": 0.4, "align_min_tight_fraction": 0.0, "align_chain_check": False,
@@ -181,7 +181,10 @@ class FusionConfig(GatmoModel):
         "gatmo_pose_carry_m": 0.0, "motion_from_matcher": False,
         "matcher_motion_max_gap_m": 0.2, "matcher_motion_max_gap_deg": 10.0,
         "bridge_evidence": False, "bridge_max_closure_m": 0.02, "bridge_max_closure_deg": 1.0,
-        "bridge_max_travel_m": 3.0}
+        "bridge_max_travel_m": 3.0,
+        # (sixtieth and sixty-first sessions)
+        "tight_between_updates": "off", "publish_tight_contradictions": False,
+        "restart_tight_contradictions": 0, "restart_agree_m": 0.05, "restart_agree_deg": 2.0}
 
     use_scan_matcher: bool = Field(
         True, description="run the ICP scan matcher beside the localizer; its frame is reset "
@@ -227,23 +230,6 @@ class FusionConfig(GatmoModel):
         "the run was started from (a given initial pose), carried by the wheels, is averaged "
         "with the filter's as a confirmed one is, its own error the initial cloud's standard "
         "deviation instead of publish_blend_base_std_m")
-    publish_tight_contradictions: bool = Field(
-        False, description="with publish_pose aligned: an alignment that contradicts the "
-        "filter (corrects it by more than align_max_correction_*) yet puts at least "
-        "publish_min_tight_fraction of its points within align_tight_m of a map edge is "
-        "published as a confirmed pose is (the filter, pulled by moved furniture, is the one "
-        "off); GATMO is still not handed it")
-    restart_tight_contradictions: int = Field(
-        0, ge=0, description="start the localizer again (relocalize_std_*) at the pose the "
-        "scan-to-map alignment converged to once this many of its tight contradictions "
-        "(publish_tight_contradictions' test) in a row agree after odometry (within "
-        "restart_agree_m and restart_agree_deg); 0: never")
-    restart_agree_m: float = Field(
-        0.05, gt=0, description="see restart_tight_contradictions: the distance within which "
-        "two tight contradictions' poses agree after odometry")
-    restart_agree_deg: float = Field(
-        2.0, gt=0, description="see restart_tight_contradictions: the heading difference within "
-        "which two tight contradictions' poses agree after odometry")
     publish_blend_max_m: float = Field(
         6.0, ge=0, description="see publish_blend: once the carried pose has moved farther than "
         "this from where it was confirmed, the filter's estimate is published")
@@ -477,9 +463,6 @@ class MapAligner:
         #: of the last refine()'s points, the fraction within ``align_tight_m`` of a map edge
         #: at the pose it converged to (0 when it did not run)
         self.last_tight_fraction = 0.0
-        #: the pose the last refine() converged to when it confirmed or contradicted the pose
-        #: handed to it (map frame, (3,)); None otherwise
-        self.last_aligned_pose_xytheta: np.ndarray | None = None
 
     def set_grid(self, grid: OccupancyGrid, edges_xy: np.ndarray | None = None) -> None:
         """Align against ``grid``'s edges: ``edges_xy`` (M, 2), its :func:`_edge_points`
@@ -503,7 +486,6 @@ class MapAligner:
         self.last_verified = False
         self.last_outcome = "no_map"
         self.last_tight_fraction = 0.0
-        self.last_aligned_pose_xytheta = None
         if self._tree is None:
             return inconclusive
         pts = voxel_downsample(scan.points_base_xy(), 0.05)
@@ -525,7 +507,6 @@ class MapAligner:
               and abs(corr[2]) <= np.radians(f.align_max_correction_deg))
         self.last_verified = bool(ok)
         self.last_outcome = "confirmed" if ok else "contradicts"
-        self.last_aligned_pose_xytheta = np.asarray(res.T_target_source, dtype=float)
         return (res.T_target_source if ok else pose_xytheta), bool(ok)
 
 
@@ -759,9 +740,6 @@ class LocalizationStack:
         # relocalizer; None: work them out again (the map changed)
         self._edges: tuple[OccupancyGrid, np.ndarray] | None = None
         self._reloc_found: tuple[np.ndarray, np.ndarray, int] | None = None
-        # restart_tight_contradictions: the last tight contradiction's pose, the odometry it
-        # was found at and how many in a row agreed
-        self._contradicted: tuple[np.ndarray, np.ndarray, int] | None = None
         # odometry at the last update, and the travel since the filter last fitted the map
         self._reloc_odom: np.ndarray | None = None
         self._reloc_travel_m = 0.0
@@ -779,7 +757,6 @@ class LocalizationStack:
         self._published_anchor = None
         self._last_align_outcome = None
         self._reloc_found = None
-        self._contradicted = None
         self._reloc_stale = True
         self._edges = None
         self._reloc_odom, self._reloc_travel_m = None, 0.0
@@ -1102,17 +1079,13 @@ class LocalizationStack:
         self.n_scans += 1
         if align_outcome is not None:
             self._last_align_outcome = align_outcome
-            restart = self._contradiction_restart(align_outcome, odom)
-            if restart is not None:
-                self._restart_at(restart, scan.stamp_s, loc_pose)
-                loc_pose = self._last_loc = restart
-                relocalized = True
         published = _wrapped(loc_pose)
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
-            published = self._aligned_pose(published, odom,
-                                           self._tight_pose(align_outcome, gatmo_pose))
+            tight = (align_outcome == "confirmed" and self._aligner.last_tight_fraction
+                     >= self.fusion.publish_min_tight_fraction)
+            published = self._aligned_pose(published, odom, gatmo_pose if tight else None)
         if self.anchor is not None and self.fusion.publish_anchor_when_apart:
             # the sharp filter slides onto moved furniture before the anchor test restarts it
             # (docs/experiments.md, forty-seventh session): report the anchor meanwhile
@@ -1216,53 +1189,6 @@ class LocalizationStack:
         ranges = scan.ranges_m.copy()
         ranges[withheld] = np.nan
         return replace(scan, ranges_m=ranges), withheld
-
-    def _tight_pose(self, align_outcome: str | None,
-                    confirmed: np.ndarray | None) -> np.ndarray | None:
-        """The pose this scan's alignment converged to with a tight fit (at least
-        ``publish_min_tight_fraction`` of its points within ``align_tight_m`` of a map edge):
-        ``confirmed`` (the pose GATMO was handed) when it confirmed the filter, or, with
-        ``publish_tight_contradictions``, the pose it converged to when it contradicted it;
-        else None. On the rearranged halls a tight contradiction's pose is 1 cm off
-        (median) where the filter's is 0.16-0.2 m off (docs/experiments.md, sixty-first
-        session)."""
-        f = self.fusion
-        if align_outcome == "confirmed":
-            pose = confirmed
-        elif align_outcome == "contradicts" and f.publish_tight_contradictions:
-            pose = self._aligner.last_aligned_pose_xytheta
-        else:
-            return None
-        if self._aligner.last_tight_fraction < f.publish_min_tight_fraction:
-            return None
-        return pose
-
-    def _contradiction_restart(self, align_outcome: str, odom: np.ndarray) -> np.ndarray | None:
-        """``restart_tight_contradictions``: the pose to start the localizer again at, on this
-        scan, or None. A tight contradiction's pose is 2 cm off (median) when the one before
-        agrees with it after odometry, the filter's 0.2 m (docs/experiments.md, sixty-first
-        session)."""
-        f = self.fusion
-        if (f.restart_tight_contradictions <= 0 or align_outcome == "not_converged"
-                or not callable(getattr(self.localizer, "set_initial_pose", None))):
-            return None  # (an alignment that did not converge says nothing either way)
-        if align_outcome != "contradicts" or (
-                self._aligner.last_tight_fraction < f.publish_min_tight_fraction):
-            self._contradicted = None
-            return None
-        found = np.asarray(self._aligner.last_aligned_pose_xytheta, dtype=float)
-        n = 1
-        if self._contradicted is not None:
-            prev, prev_odom, k = self._contradicted
-            d = relative(compose(prev, relative(prev_odom, odom)), found)
-            if (np.hypot(d[0], d[1]) <= f.restart_agree_m
-                    and abs(d[2]) <= np.radians(f.restart_agree_deg)):
-                n = k + 1
-        if n < f.restart_tight_contradictions or not _startable_at(self.localizer, found):
-            self._contradicted = (found, odom.copy(), n)
-            return None
-        self._contradicted = None
-        return _wrapped(found)
 
     def _aligned_pose(self, loc_pose: np.ndarray, odom: np.ndarray,
                       confirmed: np.ndarray | None) -> np.ndarray:
