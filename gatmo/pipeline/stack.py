@@ -279,6 +279,11 @@ class FusionConfig(GatmoModel):
         "confident poses since; a jump of the filter itself keeps the full wait. Off here, on "
         "in sim_stack_config (docs/experiments.md, fiftieth and fifty-first sessions)")
     settle_confirmed_poses: int = Field(3, ge=1, description="see settle_until_confirmed")
+    align_masked: bool = Field(
+        False, description="the scan-to-map alignment is handed the scan the localizer "
+        "weighs, without the returns mask_unexplained withholds (furniture the map does not "
+        "have yet, people, an object's returns missing it by a consistent offset); GATMO is "
+        "still handed every return")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -1051,11 +1056,12 @@ class LocalizationStack:
             # the filter updates only every update_min_d of travel; between its confident
             # updates the matcher's pose stays precise for a while (confident_for_m), and the
             # scan-to-map alignment below checks every such pose directly
+            aligned_scan = masked if self.fusion.align_masked else scan
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
             if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed is not None
                     and self.fusion.settle_until_confirmed and self.fusion.align_to_map):
-                self._settle_after_restart(pose, scan)
+                self._settle_after_restart(pose, aligned_scan)
             pose_ok = pose_ok and self._settle_left_m <= 0.0
             if pose_ok and self._anchor_disagrees(anchor_est, loc_pose):
                 pose_ok = False
@@ -1063,7 +1069,7 @@ class LocalizationStack:
             map_pose = pose
             verified = pose_ok
             if pose_ok and self.fusion.align_to_map:
-                map_pose, pose_ok = self._map_aligner().refine(pose, scan)
+                map_pose, pose_ok = self._map_aligner().refine(pose, aligned_scan)
                 verified = self._aligner.last_verified
                 align_outcome = self._aligner.last_outcome
             if pose_ok:
