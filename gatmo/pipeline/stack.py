@@ -279,11 +279,13 @@ class FusionConfig(GatmoModel):
         "confident poses since; a jump of the filter itself keeps the full wait. Off here, on "
         "in sim_stack_config (docs/experiments.md, fiftieth and fifty-first sessions)")
     settle_confirmed_poses: int = Field(3, ge=1, description="see settle_until_confirmed")
-    align_masked: bool = Field(
-        False, description="the scan-to-map alignment is handed the scan the localizer "
-        "weighs, without the returns mask_unexplained withholds (furniture the map does not "
-        "have yet, people, an object's returns missing it by a consistent offset); GATMO is "
-        "still handed every return")
+    align_masked: Literal["off", "publish", "all"] = Field(
+        "off", description="the scan-to-map alignment on the scan the localizer weighs, "
+        "without the returns mask_unexplained withholds (furniture the map does not have yet, "
+        "people, an object's returns missing it by a consistent offset): publish, a second "
+        "alignment of that scan (where returns were withheld) gives the pose published "
+        "(publish_pose aligned) while GATMO's poses and their checks stay the full scan's; "
+        "all, the one alignment is of that scan, for both. GATMO is handed every return")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -1051,12 +1053,12 @@ class LocalizationStack:
         changed = False
         gatmo_pose = None
         verified = False
-        align_outcome = None
+        align_outcome = publish_outcome = publish_confirmed = None
         if self.mapper is not None:
             # the filter updates only every update_min_d of travel; between its confident
             # updates the matcher's pose stays precise for a while (confident_for_m), and the
             # scan-to-map alignment below checks every such pose directly
-            aligned_scan = masked if self.fusion.align_masked else scan
+            aligned_scan = masked if self.fusion.align_masked == "all" else scan
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
             if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed is not None
@@ -1069,9 +1071,17 @@ class LocalizationStack:
             map_pose = pose
             verified = pose_ok
             if pose_ok and self.fusion.align_to_map:
-                map_pose, pose_ok = self._map_aligner().refine(pose, aligned_scan)
-                verified = self._aligner.last_verified
-                align_outcome = self._aligner.last_outcome
+                aligner = self._map_aligner()
+                map_pose, pose_ok = aligner.refine(pose, aligned_scan)
+                verified = aligner.last_verified
+                align_outcome = publish_outcome = aligner.last_outcome
+                publish_confirmed = self._tight_confirmed(map_pose)
+                if self.fusion.align_masked == "publish" and withheld is not None:
+                    # the returns the localizer does not weigh pull the alignment too; GATMO
+                    # keeps the full scan's verdict (docs/experiments.md, sixty-first session)
+                    masked_pose, _ = aligner.refine(pose, masked)
+                    publish_outcome = aligner.last_outcome
+                    publish_confirmed = self._tight_confirmed(masked_pose)
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
@@ -1083,15 +1093,13 @@ class LocalizationStack:
                 self._aligner.set_grid(*self._map_edges())
             self._reloc_stale = self._reloc_stale or changed
         self.n_scans += 1
-        if align_outcome is not None:
-            self._last_align_outcome = align_outcome
+        if publish_outcome is not None:
+            self._last_align_outcome = publish_outcome
         published = _wrapped(loc_pose)
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
-            tight = (align_outcome == "confirmed" and self._aligner.last_tight_fraction
-                     >= self.fusion.publish_min_tight_fraction)
-            published = self._aligned_pose(published, odom, gatmo_pose if tight else None)
+            published = self._aligned_pose(published, odom, publish_confirmed)
         if self.anchor is not None and self.fusion.publish_anchor_when_apart:
             # the sharp filter slides onto moved furniture before the anchor test restarts it
             # (docs/experiments.md, forty-seventh session): report the anchor meanwhile
@@ -1195,6 +1203,16 @@ class LocalizationStack:
         ranges = scan.ranges_m.copy()
         ranges[withheld] = np.nan
         return replace(scan, ranges_m=ranges), withheld
+
+    def _tight_confirmed(self, aligned_xytheta: np.ndarray) -> np.ndarray | None:
+        """``aligned_xytheta`` (3,), the pose the alignment just gave back, if it confirmed
+        the pose it was handed with at least ``publish_min_tight_fraction`` of its points
+        within ``align_tight_m`` of a map edge (a pose to publish); else None."""
+        a = self._aligner
+        if (a.last_outcome != "confirmed"
+                or a.last_tight_fraction < self.fusion.publish_min_tight_fraction):
+            return None
+        return np.array(aligned_xytheta, dtype=float)
 
     def _aligned_pose(self, loc_pose: np.ndarray, odom: np.ndarray,
                       confirmed: np.ndarray | None) -> np.ndarray:
