@@ -1462,3 +1462,68 @@ def test_a_run_publishes_its_given_start_pose_carried_until_the_first_confirmati
         w_filter = sc**2 / (sc**2 + 0.05**2)
         assert abs(err[i] - np.hypot(*bias[:2]) * w_filter) < 0.006, i
     assert np.all(err[:4] < np.hypot(*bias[:2]) - 0.007)  # nearer than the filter alone
+
+
+class _MaskingMapOnly(_MapOnly):
+    """:class:`_MapOnly` that calls the returns within 0.15 m of ``unmapped`` boxes (x0, y0,
+    x1, y1) unexplained (as GATMO does with furniture its map does not have yet)."""
+
+    def __init__(self, grid, unmapped):
+        super().__init__(grid)
+        self.unmapped = unmapped
+
+    def unexplained_at(self, points_xy):
+        p = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+        out = np.zeros(len(p), dtype=bool)
+        for x0, y0, x1, y1 in self.unmapped:
+            dx = np.maximum(np.maximum(x0 - p[:, 0], p[:, 0] - x1), 0.0)
+            dy = np.maximum(np.maximum(y0 - p[:, 1], p[:, 1] - y1), 0.0)
+            out |= np.hypot(dx, dy) <= 0.15
+        return out
+
+
+def _masked_run(align_masked):
+    """(truth (6, 3), the filter's bias (3,), the steps, the poses GATMO was handed): six
+    boxes stand where the map has none, a third of the returns on them."""
+    mapped = [(1.0, 0.6, 1.4, 1.0), (4.6, 2.8, 5.0, 3.2)]
+    unmapped = [(x, y, x + 0.3, y + 0.3) for x in (1.8, 3.0, 4.2) for y in (0.9, 2.8)]
+    grid = room_grid(6, 4, 0.05, boxes=mapped)
+    world = room_grid(6, 4, 0.05, boxes=mapped + unmapped)
+    n = 6
+    truth = np.stack([np.linspace(2.3, 2.8, n), np.full(n, 2.0), np.zeros(n)], axis=1)
+    bias = np.array([0.03, -0.01, 0.005])
+    loc = ScriptedLocalizer(truth, confident_at=range(n), bias=bias)
+    handed = []
+    mapper = _MaskingMapOnly(grid, unmapped)
+    mapper.update = lambda pose, scan, **kw: handed.append(np.array(pose, float)) or []
+    fusion = FusionConfig(use_scan_matcher=False, align_masked=align_masked,
+                          mask_withheld=False, mask_offset_objects=False,
+                          publish_min_tight_fraction=0.8)
+    stack = LocalizationStack(loc, None, mapper, fusion)
+    stack.begin_run(1)
+    out = [stack.step(make_scan(world, truth[i], n_beams=361, fov_rad=2 * np.pi,
+                                max_range_m=8.0, odom_pose_xytheta=truth[i],
+                                stamp_s=float(i))) for i in range(n)]
+    return truth, bias, out, np.array(handed)
+
+
+@pytest.mark.parametrize("align_masked", ["publish", "all"])
+def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
+    """The full scan's alignment confirms the filter's pose (3 cm off; the walls and the
+    mapped boxes pin it) but loosely (the unmapped boxes), so the filter's pose is published.
+    ``align_masked``: aligned without the returns GATMO calls unexplained, the fit is tight
+    and its pose (under 1 cm off) is published; with ``publish`` GATMO is handed the full
+    scan's poses as without the option, with ``all`` the masked scan's."""
+    truth, bias, out, handed = _masked_run(align_masked)
+    _, _, out_off, handed_off = _masked_run("off")
+    assert all(o.align_outcome == "confirmed" for o in out + out_off)
+    # scan 0 is never masked: there is no prediction yet
+    published_off = np.array([o.pose_xytheta for o in out_off])
+    np.testing.assert_allclose(published_off[1:], truth[1:] + bias, atol=1e-9)
+    published = np.array([o.pose_xytheta for o in out])
+    assert np.all(np.hypot(*(published[1:, :2] - truth[1:, :2]).T) < 0.01)
+    if align_masked == "publish":
+        np.testing.assert_array_equal(handed, handed_off)
+    else:
+        assert np.abs(handed[1:] - handed_off[1:]).max() > 1e-6
+        assert np.all(np.hypot(*(handed[1:, :2] - truth[1:, :2]).T) < 0.01)
