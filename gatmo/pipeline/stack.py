@@ -286,6 +286,10 @@ class FusionConfig(GatmoModel):
         "alignment of that scan (where returns were withheld) gives the pose published "
         "(publish_pose aligned) while GATMO's poses and their checks stay the full scan's; "
         "all, the one alignment is of that scan, for both. GATMO is handed every return")
+    align_mask_offsets: bool = Field(
+        True, description="with align_masked: the returns of an object missing it by a "
+        "consistent offset (mask_offset_objects) are withheld from the alignment too; off, "
+        "only the other withheld returns are")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -721,6 +725,7 @@ class LocalizationStack:
         # confirmations since a stack restart (settle_until_confirmed); None: none pending
         self._settle_confirmed: int | None = None
         self._injected_seen = 0  # the localizer's random particles counted so far
+        self._offset_beams: np.ndarray | None = None  # see _masked
         # a localizer without the ``withheld`` argument (an older stand-in) gets the masked
         # scan alone
         try:
@@ -1058,7 +1063,8 @@ class LocalizationStack:
             # the filter updates only every update_min_d of travel; between its confident
             # updates the matcher's pose stays precise for a while (confident_for_m), and the
             # scan-to-map alignment below checks every such pose directly
-            aligned_scan = masked if self.fusion.align_masked == "all" else scan
+            aligned_scan = (self._alignment_scan(scan, masked)
+                            if self.fusion.align_masked == "all" else scan)
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
             if (self._settle_left_m > 0.0 and pose_ok and self._settle_confirmed is not None
@@ -1079,7 +1085,7 @@ class LocalizationStack:
                 if self.fusion.align_masked == "publish" and withheld is not None:
                     # the returns the localizer does not weigh pull the alignment too; GATMO
                     # keeps the full scan's verdict (docs/experiments.md, sixty-first session)
-                    masked_pose, _ = aligner.refine(pose, masked)
+                    masked_pose, _ = aligner.refine(pose, self._alignment_scan(scan, masked))
                     publish_outcome = aligner.last_outcome
                     publish_confirmed = self._tight_confirmed(masked_pose)
             if pose_ok:
@@ -1176,6 +1182,7 @@ class LocalizationStack:
         """The scan with the returns GATMO cannot explain set to NaN (``mask_unexplained``),
         placed from the last localizer pose moved by odometry, and which beams (B,) bool were
         withheld (None: none)."""
+        self._offset_beams = None  # (align_mask_offsets) the offset objects' beams (B,) bool
         unexplained_at = getattr(self.mapper, "unexplained_at", None)
         if unexplained_at is None or not self.fusion.mask_unexplained:
             return scan, None
@@ -1194,7 +1201,11 @@ class LocalizationStack:
         if self.fusion.mask_withheld:
             bad |= self.mapper.withheld_at(pts)
         if self.fusion.mask_offset_objects and self._last_precise:
-            bad |= self.mapper.offset_at(pts)
+            offset = self.mapper.offset_at(pts)
+            if offset.any() and not self.fusion.align_mask_offsets:
+                self._offset_beams = np.zeros(scan.num_beams, dtype=bool)
+                self._offset_beams[np.nonzero(valid)[0][offset & ~bad]] = True
+            bad |= offset
         self.n_masked += int(bad.sum())
         if not bad.any():
             return scan, None
@@ -1203,6 +1214,17 @@ class LocalizationStack:
         ranges = scan.ranges_m.copy()
         ranges[withheld] = np.nan
         return replace(scan, ranges_m=ranges), withheld
+
+    def _alignment_scan(self, scan: Scan, masked: Scan) -> Scan:
+        """``align_masked``: the scan the alignment is handed, ``masked`` but with the
+        returns of objects missing it by an offset (``offset_at``) put back unless
+        ``align_mask_offsets``: with a right map they are the scan's evidence that the pose is
+        off."""
+        if self._offset_beams is None:
+            return masked
+        ranges = masked.ranges_m.copy()
+        ranges[self._offset_beams] = scan.ranges_m[self._offset_beams]
+        return replace(masked, ranges_m=ranges)
 
     def _tight_confirmed(self, aligned_xytheta: np.ndarray) -> np.ndarray | None:
         """``aligned_xytheta`` (3,), the pose the alignment just gave back, if it confirmed
