@@ -282,14 +282,11 @@ class FusionConfig(GatmoModel):
     align_masked: Literal["off", "publish", "all"] = Field(
         "off", description="the scan-to-map alignment on the scan the localizer weighs, "
         "without the returns mask_unexplained withholds (furniture the map does not have yet, "
-        "people, an object's returns missing it by a consistent offset): publish, a second "
+        "people, withheld objects; an object's returns missing it by a consistent offset are "
+        "kept: with a right map they show the pose off): publish, a second "
         "alignment of that scan (where returns were withheld) gives the pose published "
         "(publish_pose aligned) while GATMO's poses and their checks stay the full scan's; "
         "all, the one alignment is of that scan, for both. GATMO is handed every return")
-    align_mask_offsets: bool = Field(
-        True, description="with align_masked: the returns of an object missing it by a "
-        "consistent offset (mask_offset_objects) are withheld from the alignment too; off, "
-        "only the other withheld returns are")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -1182,7 +1179,7 @@ class LocalizationStack:
         """The scan with the returns GATMO cannot explain set to NaN (``mask_unexplained``),
         placed from the last localizer pose moved by odometry, and which beams (B,) bool were
         withheld (None: none)."""
-        self._offset_beams = None  # (align_mask_offsets) the offset objects' beams (B,) bool
+        self._offset_beams = None  # (align_masked) the offset objects' beams (B,) bool
         unexplained_at = getattr(self.mapper, "unexplained_at", None)
         if unexplained_at is None or not self.fusion.mask_unexplained:
             return scan, None
@@ -1202,7 +1199,7 @@ class LocalizationStack:
             bad |= self.mapper.withheld_at(pts)
         if self.fusion.mask_offset_objects and self._last_precise:
             offset = self.mapper.offset_at(pts)
-            if offset.any() and not self.fusion.align_mask_offsets:
+            if offset.any():
                 self._offset_beams = np.zeros(scan.num_beams, dtype=bool)
                 self._offset_beams[np.nonzero(valid)[0][offset & ~bad]] = True
             bad |= offset
@@ -1216,10 +1213,11 @@ class LocalizationStack:
         return replace(scan, ranges_m=ranges), withheld
 
     def _alignment_scan(self, scan: Scan, masked: Scan) -> Scan:
-        """``align_masked``: the scan the alignment is handed, ``masked`` but with the
-        returns of objects missing it by an offset (``offset_at``) put back unless
-        ``align_mask_offsets``: with a right map they are the scan's evidence that the pose is
-        off."""
+        """``align_masked``: the scan the alignment is handed, ``masked`` with the returns of
+        objects that miss it by an offset (``offset_at``) put back: where the map is right
+        they are the scan's evidence that the pose is off (withheld too, the halls' ATE
+        before anything moved rose 0.029 -> 0.030 m; docs/experiments.md, sixty-first
+        session)."""
         if self._offset_beams is None:
             return masked
         ranges = masked.ranges_m.copy()
