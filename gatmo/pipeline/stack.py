@@ -1079,7 +1079,8 @@ class LocalizationStack:
                 verified = aligner.last_verified
                 align_outcome = publish_outcome = aligner.last_outcome
                 publish_confirmed = self._tight_confirmed(map_pose)
-                if self.fusion.align_masked == "publish" and withheld is not None:
+                if self.fusion.align_masked == "publish" and self._withheld_beyond_offsets(
+                        withheld):
                     # the returns the localizer does not weigh pull the alignment too; GATMO
                     # keeps the full scan's verdict (docs/experiments.md, sixty-first session)
                     masked_pose, _ = aligner.refine(pose, self._alignment_scan(scan, masked))
@@ -1211,6 +1212,13 @@ class LocalizationStack:
         ranges = scan.ranges_m.copy()
         ranges[withheld] = np.nan
         return replace(scan, ranges_m=ranges), withheld
+
+    def _withheld_beyond_offsets(self, withheld: np.ndarray | None) -> bool:
+        """The scan had returns withheld (``withheld`` (B,) bool or None) other than the
+        offset objects' that :meth:`_alignment_scan` puts back."""
+        if withheld is None:
+            return False
+        return self._offset_beams is None or bool((withheld & ~self._offset_beams).any())
 
     def _alignment_scan(self, scan: Scan, masked: Scan) -> Scan:
         """``align_masked``: the scan the alignment is handed, ``masked`` with the returns of
