@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from gatmo.geometry import compose, relative
+from gatmo.geometry import compose, relative, transform_points
 from gatmo.maps.grid import OCCUPIED, OccupancyGrid
 from gatmo.pipeline.stack import FusionConfig, LocalizationStack, is_confident
 from tests.helpers import make_scan, room_grid
@@ -1527,3 +1527,31 @@ def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
     else:
         assert np.abs(handed[1:] - handed_off[1:]).max() > 1e-6
         assert np.all(np.hypot(*(handed[1:, :2] - truth[1:, :2]).T) < 0.01)
+
+
+def test_the_alignment_keeps_the_returns_of_an_object_missing_it_by_an_offset():
+    """``align_masked``: the localizer is kept from both the returns GATMO calls unexplained
+    and those of an object that misses them by an offset (``offset_at``); the alignment's
+    scan lacks only the first (with a right map the second show the pose off)."""
+    box, unmapped = (1.0, 0.6, 1.4, 1.0), [(3.0, 2.8, 3.3, 3.1)]
+    grid = room_grid(6, 4, 0.05, boxes=[box])
+    world = room_grid(6, 4, 0.05, boxes=[box] + unmapped)
+    mapper = _MaskingMapOnly(grid, unmapped)
+    near_box = _MaskingMapOnly(grid, [box]).unexplained_at
+    mapper.offset_at = near_box
+    pose = np.array([2.3, 2.0, 0.0])
+    stack = LocalizationStack(ScriptedLocalizer(pose[None], confident_at=[0]), None, mapper,
+                              FusionConfig(use_scan_matcher=False, mask_withheld=False,
+                                           mask_offset_objects=True, align_masked="publish"))
+    stack.begin_run(1)
+    stack._last_loc, stack._last_odom, stack._last_precise = pose, pose, True
+    scan = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
+                     odom_pose_xytheta=pose, stamp_s=0.0)
+    masked, withheld = stack._masked(scan)
+    aligned = stack._alignment_scan(scan, masked)
+    ends = transform_points(pose, scan.points_base_xy(only_valid=False))
+    on_unmapped, on_box = mapper.unexplained_at(ends), near_box(ends)
+    assert on_unmapped.sum() >= 5 and on_box.sum() >= 5
+    np.testing.assert_array_equal(withheld, on_unmapped | on_box)
+    assert np.all(np.isnan(aligned.ranges_m[on_unmapped]))
+    np.testing.assert_array_equal(aligned.ranges_m[~on_unmapped], scan.ranges_m[~on_unmapped])
