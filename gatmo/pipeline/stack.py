@@ -1200,7 +1200,7 @@ class LocalizationStack:
             bad |= self.mapper.withheld_at(pts)
         if self.fusion.mask_offset_objects and self._last_precise:
             offset = self.mapper.offset_at(pts)
-            if offset.any():
+            if offset.any() and self.fusion.align_masked != "off":
                 self._offset_beams = np.zeros(scan.num_beams, dtype=bool)
                 self._offset_beams[np.nonzero(valid)[0][offset & ~bad]] = True
             bad |= offset
