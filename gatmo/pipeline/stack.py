@@ -287,6 +287,10 @@ class FusionConfig(GatmoModel):
         "alignment of that scan (where returns were withheld) gives the pose published "
         "(publish_pose aligned) while GATMO's poses and their checks stay the full scan's; "
         "all, the one alignment is of that scan, for both. GATMO is handed every return")
+    align_masked_fallback: bool = Field(
+        False, description="align_masked all: where the masked scan's alignment is "
+        "inconclusive (too few points, not converged, degenerate, low fitness), the full "
+        "scan's alignment decides, for GATMO and the pose published")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -1076,6 +1080,11 @@ class LocalizationStack:
             if pose_ok and self.fusion.align_to_map:
                 aligner = self._map_aligner()
                 map_pose, pose_ok = aligner.refine(pose, aligned_scan)
+                if (aligned_scan is not scan and self.fusion.align_masked_fallback
+                        and aligner.last_outcome not in ("confirmed", "contradicts")):
+                    # the masked scan's alignment is inconclusive (too few points, no
+                    # convergence): the full scan's decides
+                    map_pose, pose_ok = aligner.refine(pose, scan)
                 verified = aligner.last_verified
                 align_outcome = publish_outcome = aligner.last_outcome
                 publish_confirmed = self._tight_confirmed(map_pose)

@@ -1482,20 +1482,29 @@ class _MaskingMapOnly(_MapOnly):
         return out
 
 
-def _masked_run(align_masked):
-    """(truth (6, 3), the filter's bias (3,), the steps, the poses GATMO was handed): six
-    boxes stand where the map has none, a third of the returns on them."""
+def _masked_run(align_masked, box_m=0.3):
+    """(truth (6, 3), the filter's bias (3,), the steps, the poses GATMO was handed, whether
+    each was handed as verified): six ``box_m`` boxes stand where the map has none (0.3 m: a
+    third of the returns on them)."""
     mapped = [(1.0, 0.6, 1.4, 1.0), (4.6, 2.8, 5.0, 3.2)]
-    unmapped = [(x, y, x + 0.3, y + 0.3) for x in (1.8, 3.0, 4.2) for y in (0.9, 2.8)]
+    corners = (((1.8, 3.0, 4.2), (0.9, 2.8)) if box_m <= 0.3 else ((1.6, 2.9, 4.0), (0.7, 2.6)))
+    unmapped = [(x, y, x + box_m, y + box_m) for x in corners[0] for y in corners[1]]
     grid = room_grid(6, 4, 0.05, boxes=mapped)
     world = room_grid(6, 4, 0.05, boxes=mapped + unmapped)
     n = 6
-    truth = np.stack([np.linspace(2.3, 2.8, n), np.full(n, 2.0), np.zeros(n)], axis=1)
+    y = 2.0 if box_m <= 0.3 else 1.9
+    truth = np.stack([np.linspace(2.3, 2.8, n), np.full(n, y), np.zeros(n)], axis=1)
     bias = np.array([0.03, -0.01, 0.005])
     loc = ScriptedLocalizer(truth, confident_at=range(n), bias=bias)
-    handed = []
+    handed, verified = [], []
+
+    def update(pose, scan, **kw):
+        handed.append(np.array(pose, float))
+        verified.append(bool(kw["pose_verified"]))
+        return []
+
     mapper = _MaskingMapOnly(grid, unmapped)
-    mapper.update = lambda pose, scan, **kw: handed.append(np.array(pose, float)) or []
+    mapper.update = update
     fusion = FusionConfig(use_scan_matcher=False, align_masked=align_masked,
                           mask_withheld=False, mask_offset_objects=False,
                           publish_min_tight_fraction=0.8)
@@ -1504,7 +1513,7 @@ def _masked_run(align_masked):
     out = [stack.step(make_scan(world, truth[i], n_beams=361, fov_rad=2 * np.pi,
                                 max_range_m=8.0, odom_pose_xytheta=truth[i],
                                 stamp_s=float(i))) for i in range(n)]
-    return truth, bias, out, np.array(handed)
+    return truth, bias, out, np.array(handed), np.array(verified)
 
 
 @pytest.mark.parametrize("align_masked", ["publish", "all"])
@@ -1514,8 +1523,8 @@ def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
     ``align_masked``: aligned without the returns GATMO calls unexplained, the fit is tight
     and its pose (under 1 cm off) is published; with ``publish`` GATMO is handed the full
     scan's poses as without the option, with ``all`` the masked scan's."""
-    truth, bias, out, handed = _masked_run(align_masked)
-    _, _, out_off, handed_off = _masked_run("off")
+    truth, bias, out, handed, _ = _masked_run(align_masked)
+    _, _, out_off, handed_off, _ = _masked_run("off")
     assert all(o.align_outcome == "confirmed" for o in out + out_off)
     # scan 0 is never masked: there is no prediction yet
     published_off = np.array([o.pose_xytheta for o in out_off])
@@ -1527,6 +1536,57 @@ def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
     else:
         assert np.abs(handed[1:] - handed_off[1:]).max() > 1e-6
         assert np.all(np.hypot(*(handed[1:, :2] - truth[1:, :2]).T) < 0.01)
+
+
+def test_with_align_masked_all_gatmo_takes_the_masked_scan_s_confirmation():
+    """Six 0.6 m boxes the map lacks take so many returns that the full scan's alignment is
+    inconclusive (low fitness) from the second scan on: GATMO is handed those poses unverified
+    (no evidence of absence from them). ``align_masked: all`` aligns the masked scan, which
+    confirms: GATMO takes verified poses under 1 cm off; ``publish`` leaves GATMO's as off's."""
+    truth, _, out_off, handed_off, verified_off = _masked_run("off", box_m=0.6)
+    assert [o.align_outcome for o in out_off[1:]] == ["low_fitness"] * 5
+    assert not verified_off[1:].any()
+    _, _, out_pub, handed_pub, verified_pub = _masked_run("publish", box_m=0.6)
+    np.testing.assert_array_equal(handed_pub, handed_off)
+    np.testing.assert_array_equal(verified_pub, verified_off)
+    _, _, out_all, handed_all, verified_all = _masked_run("all", box_m=0.6)
+    assert [o.align_outcome for o in out_all[1:]] == ["confirmed"] * 5
+    assert verified_all[1:].all()
+    assert np.all(np.hypot(*(handed_all[1:, :2] - truth[1:, :2]).T) < 0.01)
+
+
+@pytest.mark.parametrize("fallback", [False, True])
+def test_an_inconclusive_masked_alignment_falls_back_to_the_full_scan_s(fallback):
+    """GATMO calls every return unexplained, so with ``align_masked: all`` the masked scan has
+    no points from the second scan on (the first is never masked) and its alignment is
+    inconclusive: GATMO is handed the filter's poses unverified. ``align_masked_fallback``:
+    the full scan's alignment decides, which confirms the pose as without the option."""
+    grid = room_grid(6, 4, 0.05, boxes=[(1.0, 0.6, 1.4, 1.0), (4.6, 2.8, 5.0, 3.2)])
+    truth = np.stack([np.linspace(2.3, 2.6, 4), np.full(4, 2.0), np.zeros(4)], axis=1)
+    handed, verified = [], []
+
+    def update(pose, scan, **kw):
+        handed.append(np.array(pose, float))
+        verified.append(bool(kw["pose_verified"]))
+        return []
+
+    mapper = _MaskingMapOnly(grid, [(-1.0, -1.0, 7.0, 5.0)])
+    mapper.update = update
+    loc = ScriptedLocalizer(truth, confident_at=range(4), bias=np.array([0.03, -0.01, 0.005]))
+    stack = LocalizationStack(loc, None, mapper, FusionConfig(
+        use_scan_matcher=False, align_masked="all", align_masked_fallback=fallback,
+        mask_withheld=False, mask_offset_objects=False))
+    stack.begin_run(1)
+    out = [stack.step(make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi,
+                                max_range_m=8.0, odom_pose_xytheta=truth[i],
+                                stamp_s=float(i))) for i in range(4)]
+    outcomes = [o.align_outcome for o in out]
+    if not fallback:
+        assert outcomes == ["confirmed"] + ["few_points"] * 3
+        assert verified == [True, False, False, False]
+        return
+    assert outcomes == ["confirmed"] * 4 and all(verified)
+    assert np.all(np.hypot(*(np.array(handed)[:, :2] - truth[:, :2]).T) < 0.01)
 
 
 def test_the_alignment_keeps_the_returns_of_an_object_missing_it_by_an_offset():
