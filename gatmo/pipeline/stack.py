@@ -279,14 +279,16 @@ class FusionConfig(GatmoModel):
         "confident poses since; a jump of the filter itself keeps the full wait. Off here, on "
         "in sim_stack_config (docs/experiments.md, fiftieth and fifty-first sessions)")
     settle_confirmed_poses: int = Field(3, ge=1, description="see settle_until_confirmed")
-    align_masked: Literal["off", "publish", "all"] = Field(
+    align_masked: Literal["off", "publish", "rescue", "all"] = Field(
         "off", description="the scan-to-map alignment on the scan the localizer weighs, "
         "without the returns mask_unexplained withholds (furniture the map does not have yet, "
         "people, withheld objects; an object's returns missing it by a consistent offset are "
         "kept: with a right map they show the pose off): publish, a second "
         "alignment of that scan (where returns were withheld) gives the pose published "
         "(publish_pose aligned) while GATMO's poses and their checks stay the full scan's; "
-        "all, the one alignment is of that scan, for both. GATMO is handed every return")
+        "rescue, publish, and GATMO takes the masked scan's pose where only that alignment "
+        "confirms; all, the one alignment is of that scan, for both. GATMO is handed every "
+        "return")
     align_masked_fallback: bool = Field(
         False, description="align_masked all: where the masked scan's alignment is "
         "inconclusive (too few points, not converged, degenerate, low fitness), the full "
@@ -1088,13 +1090,19 @@ class LocalizationStack:
                 verified = aligner.last_verified
                 align_outcome = publish_outcome = aligner.last_outcome
                 publish_confirmed = self._tight_confirmed(map_pose)
-                if self.fusion.align_masked == "publish" and self._withheld_beyond_offsets(
-                        withheld):
+                if self.fusion.align_masked in ("publish", "rescue") and (
+                        self._withheld_beyond_offsets(withheld)):
                     # the returns the localizer does not weigh pull the alignment too; GATMO
                     # keeps the full scan's verdict (docs/experiments.md, sixty-first session)
-                    masked_pose, _ = aligner.refine(pose, self._alignment_scan(scan, masked))
+                    masked_pose, masked_ok = aligner.refine(
+                        pose, self._alignment_scan(scan, masked))
                     publish_outcome = aligner.last_outcome
                     publish_confirmed = self._tight_confirmed(masked_pose)
+                    if (self.fusion.align_masked == "rescue" and align_outcome != "confirmed"
+                            and publish_outcome == "confirmed"):
+                        # ...unless only the masked scan's confirms the pose
+                        map_pose, pose_ok, verified = masked_pose, masked_ok, True
+                        align_outcome = publish_outcome
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,

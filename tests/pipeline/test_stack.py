@@ -1516,13 +1516,14 @@ def _masked_run(align_masked, box_m=0.3):
     return truth, bias, out, np.array(handed), np.array(verified)
 
 
-@pytest.mark.parametrize("align_masked", ["publish", "all"])
+@pytest.mark.parametrize("align_masked", ["publish", "rescue", "all"])
 def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
     """The full scan's alignment confirms the filter's pose (3 cm off; the walls and the
     mapped boxes pin it) but loosely (the unmapped boxes), so the filter's pose is published.
     ``align_masked``: aligned without the returns GATMO calls unexplained, the fit is tight
-    and its pose (under 1 cm off) is published; with ``publish`` GATMO is handed the full
-    scan's poses as without the option, with ``all`` the masked scan's."""
+    and its pose (under 1 cm off) is published; with ``publish`` (and ``rescue``, the full
+    scan's confirming) GATMO is handed the full scan's poses as without the option, with
+    ``all`` the masked scan's."""
     truth, bias, out, handed, _ = _masked_run(align_masked)
     _, _, out_off, handed_off, _ = _masked_run("off")
     assert all(o.align_outcome == "confirmed" for o in out + out_off)
@@ -1531,28 +1532,30 @@ def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
     np.testing.assert_allclose(published_off[1:], truth[1:] + bias, atol=1e-9)
     published = np.array([o.pose_xytheta for o in out])
     assert np.all(np.hypot(*(published[1:, :2] - truth[1:, :2]).T) < 0.01)
-    if align_masked == "publish":
+    if align_masked in ("publish", "rescue"):
         np.testing.assert_array_equal(handed, handed_off)
     else:
         assert np.abs(handed[1:] - handed_off[1:]).max() > 1e-6
         assert np.all(np.hypot(*(handed[1:, :2] - truth[1:, :2]).T) < 0.01)
 
 
-def test_with_align_masked_all_gatmo_takes_the_masked_scan_s_confirmation():
+@pytest.mark.parametrize("align_masked", ["rescue", "all"])
+def test_gatmo_takes_the_masked_scan_s_confirmation_where_the_full_scan_s_fails(align_masked):
     """Six 0.6 m boxes the map lacks take so many returns that the full scan's alignment is
     inconclusive (low fitness) from the second scan on: GATMO is handed those poses unverified
-    (no evidence of absence from them). ``align_masked: all`` aligns the masked scan, which
-    confirms: GATMO takes verified poses under 1 cm off; ``publish`` leaves GATMO's as off's."""
+    (no evidence of absence from them). ``align_masked`` ``rescue`` and ``all`` align the
+    masked scan, which confirms: GATMO takes verified poses under 1 cm off; ``publish``
+    leaves GATMO's as off's."""
     truth, _, out_off, handed_off, verified_off = _masked_run("off", box_m=0.6)
     assert [o.align_outcome for o in out_off[1:]] == ["low_fitness"] * 5
     assert not verified_off[1:].any()
     _, _, out_pub, handed_pub, verified_pub = _masked_run("publish", box_m=0.6)
     np.testing.assert_array_equal(handed_pub, handed_off)
     np.testing.assert_array_equal(verified_pub, verified_off)
-    _, _, out_all, handed_all, verified_all = _masked_run("all", box_m=0.6)
-    assert [o.align_outcome for o in out_all[1:]] == ["confirmed"] * 5
-    assert verified_all[1:].all()
-    assert np.all(np.hypot(*(handed_all[1:, :2] - truth[1:, :2]).T) < 0.01)
+    _, _, out, handed, verified = _masked_run(align_masked, box_m=0.6)
+    assert [o.align_outcome for o in out[1:]] == ["confirmed"] * 5
+    assert verified[1:].all()
+    assert np.all(np.hypot(*(handed[1:, :2] - truth[1:, :2]).T) < 0.01)
 
 
 @pytest.mark.parametrize("fallback", [False, True])
