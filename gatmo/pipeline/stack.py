@@ -279,7 +279,7 @@ class FusionConfig(GatmoModel):
         "confident poses since; a jump of the filter itself keeps the full wait. Off here, on "
         "in sim_stack_config (docs/experiments.md, fiftieth and fifty-first sessions)")
     settle_confirmed_poses: int = Field(3, ge=1, description="see settle_until_confirmed")
-    align_masked: Literal["off", "publish", "rescue", "all"] = Field(
+    align_masked: Literal["off", "publish", "rescue", "both", "all"] = Field(
         "off", description="the scan-to-map alignment on the scan the localizer weighs, "
         "without the returns mask_unexplained withholds (furniture the map does not have yet, "
         "people, withheld objects; an object's returns missing it by a consistent offset are "
@@ -287,8 +287,9 @@ class FusionConfig(GatmoModel):
         "alignment of that scan (where returns were withheld) gives the pose published "
         "(publish_pose aligned) while GATMO's poses and their checks stay the full scan's; "
         "rescue, publish, and GATMO takes the masked scan's pose where only that alignment "
-        "confirms; all, the one alignment is of that scan, for both. GATMO is handed every "
-        "return")
+        "confirms; both, publish, and GATMO takes a pose only where both alignments confirm it "
+        "(the masked scan's); all, the one alignment is of that scan, for both. GATMO is "
+        "handed every return")
     align_masked_fallback: bool = Field(
         False, description="align_masked all: where the masked scan's alignment is "
         "inconclusive (too few points, not converged, degenerate, low fitness), the full "
@@ -1090,7 +1091,7 @@ class LocalizationStack:
                 verified = aligner.last_verified
                 align_outcome = publish_outcome = aligner.last_outcome
                 publish_confirmed = self._tight_confirmed(map_pose)
-                if self.fusion.align_masked in ("publish", "rescue") and (
+                if self.fusion.align_masked in ("publish", "rescue", "both") and (
                         self._withheld_beyond_offsets(withheld)):
                     # the returns the localizer does not weigh pull the alignment too; GATMO
                     # keeps the full scan's verdict (docs/experiments.md, sixty-first session)
@@ -1103,6 +1104,11 @@ class LocalizationStack:
                         # ...unless only the masked scan's confirms the pose
                         map_pose, pose_ok, verified = masked_pose, masked_ok, True
                         align_outcome = publish_outcome
+                    if self.fusion.align_masked == "both" and pose_ok:
+                        # GATMO takes the pose where both alignments confirm it, the masked
+                        # scan's; where the masked scan's does not, nothing
+                        map_pose, pose_ok = masked_pose, masked_ok
+                        verified = verified and masked_ok
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,
