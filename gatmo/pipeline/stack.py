@@ -184,7 +184,9 @@ class FusionConfig(GatmoModel):
         "bridge_max_travel_m": 3.0,
         # (sixtieth and sixty-first sessions)
         "tight_between_updates": "off", "publish_tight_contradictions": False,
-        "restart_tight_contradictions": 0, "restart_agree_m": 0.05, "restart_agree_deg": 2.0}
+        "restart_tight_contradictions": 0, "restart_agree_m": 0.05, "restart_agree_deg": 2.0,
+        # (sixty-second session; with align_masked's values rescue and both, code at c9a711a)
+        "align_masked_fallback": False}
 
     use_scan_matcher: bool = Field(
         True, description="run the ICP scan matcher beside the localizer; its frame is reset "
@@ -279,21 +281,14 @@ class FusionConfig(GatmoModel):
         "confident poses since; a jump of the filter itself keeps the full wait. Off here, on "
         "in sim_stack_config (docs/experiments.md, fiftieth and fifty-first sessions)")
     settle_confirmed_poses: int = Field(3, ge=1, description="see settle_until_confirmed")
-    align_masked: Literal["off", "publish", "rescue", "both", "all"] = Field(
+    align_masked: Literal["off", "publish", "all"] = Field(
         "off", description="the scan-to-map alignment on the scan the localizer weighs, "
         "without the returns mask_unexplained withholds (furniture the map does not have yet, "
         "people, withheld objects; an object's returns missing it by a consistent offset are "
         "kept: with a right map they show the pose off): publish, a second "
         "alignment of that scan (where returns were withheld) gives the pose published "
         "(publish_pose aligned) while GATMO's poses and their checks stay the full scan's; "
-        "rescue, publish, and GATMO takes the masked scan's pose where only that alignment "
-        "confirms; both, publish, and GATMO takes a pose only where both alignments confirm it "
-        "(the masked scan's); all, the one alignment is of that scan, for both. GATMO is "
-        "handed every return")
-    align_masked_fallback: bool = Field(
-        False, description="align_masked all: where the masked scan's alignment is "
-        "inconclusive (too few points, not converged, degenerate, low fitness), the full "
-        "scan's alignment decides, for GATMO and the pose published")
+        "all, the one alignment is of that scan, for both. GATMO is handed every return")
     align_to_map: bool = Field(
         True, description="refine the pose handed to GATMO by ICP of the scan against the "
         "current map's edges (MapAligner): a confirmed pose goes to GATMO as verified, one the "
@@ -1083,32 +1078,16 @@ class LocalizationStack:
             if pose_ok and self.fusion.align_to_map:
                 aligner = self._map_aligner()
                 map_pose, pose_ok = aligner.refine(pose, aligned_scan)
-                if (aligned_scan is not scan and self.fusion.align_masked_fallback
-                        and aligner.last_outcome not in ("confirmed", "contradicts")):
-                    # the masked scan's alignment is inconclusive (too few points, no
-                    # convergence): the full scan's decides
-                    map_pose, pose_ok = aligner.refine(pose, scan)
                 verified = aligner.last_verified
                 align_outcome = publish_outcome = aligner.last_outcome
                 publish_confirmed = self._tight_confirmed(map_pose)
-                if self.fusion.align_masked in ("publish", "rescue", "both") and (
-                        self._withheld_beyond_offsets(withheld)):
+                if self.fusion.align_masked == "publish" and self._withheld_beyond_offsets(
+                        withheld):
                     # the returns the localizer does not weigh pull the alignment too; GATMO
                     # keeps the full scan's verdict (docs/experiments.md, sixty-first session)
-                    masked_pose, masked_ok = aligner.refine(
-                        pose, self._alignment_scan(scan, masked))
+                    masked_pose, _ = aligner.refine(pose, self._alignment_scan(scan, masked))
                     publish_outcome = aligner.last_outcome
                     publish_confirmed = self._tight_confirmed(masked_pose)
-                    if (self.fusion.align_masked == "rescue" and align_outcome != "confirmed"
-                            and publish_outcome == "confirmed"):
-                        # ...unless only the masked scan's confirms the pose
-                        map_pose, pose_ok, verified = masked_pose, masked_ok, True
-                        align_outcome = publish_outcome
-                    if self.fusion.align_masked == "both" and pose_ok:
-                        # GATMO takes the pose where both alignments confirm it, the masked
-                        # scan's; where the masked scan's does not, nothing
-                        map_pose, pose_ok = masked_pose, masked_ok
-                        verified = verified and masked_ok
             if pose_ok:
                 map_pose = gatmo_pose = np.array(map_pose, dtype=float)
             events = self.mapper.update(map_pose, scan, pose_confident=pose_ok,

@@ -1516,14 +1516,13 @@ def _masked_run(align_masked, box_m=0.3):
     return truth, bias, out, np.array(handed), np.array(verified)
 
 
-@pytest.mark.parametrize("align_masked", ["publish", "rescue", "all"])
+@pytest.mark.parametrize("align_masked", ["publish", "all"])
 def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
     """The full scan's alignment confirms the filter's pose (3 cm off; the walls and the
     mapped boxes pin it) but loosely (the unmapped boxes), so the filter's pose is published.
     ``align_masked``: aligned without the returns GATMO calls unexplained, the fit is tight
-    and its pose (under 1 cm off) is published; with ``publish`` (and ``rescue``, the full
-    scan's confirming) GATMO is handed the full scan's poses as without the option, with
-    ``all`` the masked scan's."""
+    and its pose (under 1 cm off) is published; with ``publish`` GATMO is handed the full
+    scan's poses as without the option, with ``all`` the masked scan's."""
     truth, bias, out, handed, _ = _masked_run(align_masked)
     _, _, out_off, handed_off, _ = _masked_run("off")
     assert all(o.align_outcome == "confirmed" for o in out + out_off)
@@ -1532,64 +1531,29 @@ def test_the_masked_scan_s_alignment_gives_the_published_pose(align_masked):
     np.testing.assert_allclose(published_off[1:], truth[1:] + bias, atol=1e-9)
     published = np.array([o.pose_xytheta for o in out])
     assert np.all(np.hypot(*(published[1:, :2] - truth[1:, :2]).T) < 0.01)
-    if align_masked in ("publish", "rescue"):
+    if align_masked == "publish":
         np.testing.assert_array_equal(handed, handed_off)
     else:
         assert np.abs(handed[1:] - handed_off[1:]).max() > 1e-6
         assert np.all(np.hypot(*(handed[1:, :2] - truth[1:, :2]).T) < 0.01)
 
 
-@pytest.mark.parametrize("align_masked", ["rescue", "all"])
-def test_gatmo_takes_the_masked_scan_s_confirmation_where_the_full_scan_s_fails(align_masked):
+def test_with_align_masked_all_gatmo_takes_the_masked_scan_s_confirmation():
     """Six 0.6 m boxes the map lacks take so many returns that the full scan's alignment is
     inconclusive (low fitness) from the second scan on: GATMO is handed those poses unverified
-    (no evidence of absence from them). ``align_masked`` ``rescue`` and ``all`` align the
-    masked scan, which confirms: GATMO takes verified poses under 1 cm off; ``publish``
-    leaves GATMO's as off's."""
+    (no evidence of absence from them). ``align_masked: all`` aligns the masked scan, which
+    confirms: GATMO takes verified poses under 1 cm off; ``publish`` leaves GATMO's as
+    off's."""
     truth, _, out_off, handed_off, verified_off = _masked_run("off", box_m=0.6)
     assert [o.align_outcome for o in out_off[1:]] == ["low_fitness"] * 5
     assert not verified_off[1:].any()
     _, _, out_pub, handed_pub, verified_pub = _masked_run("publish", box_m=0.6)
     np.testing.assert_array_equal(handed_pub, handed_off)
     np.testing.assert_array_equal(verified_pub, verified_off)
-    _, _, out, handed, verified = _masked_run(align_masked, box_m=0.6)
+    _, _, out, handed, verified = _masked_run("all", box_m=0.6)
     assert [o.align_outcome for o in out[1:]] == ["confirmed"] * 5
     assert verified[1:].all()
     assert np.all(np.hypot(*(handed[1:, :2] - truth[1:, :2]).T) < 0.01)
-
-
-@pytest.mark.parametrize("fallback", [False, True])
-def test_an_inconclusive_masked_alignment_falls_back_to_the_full_scan_s(fallback):
-    """GATMO calls every return unexplained, so with ``align_masked: all`` the masked scan has
-    no points from the second scan on (the first is never masked) and its alignment is
-    inconclusive: GATMO is handed the filter's poses unverified. ``align_masked_fallback``:
-    the full scan's alignment decides, which confirms the pose as without the option."""
-    grid = room_grid(6, 4, 0.05, boxes=[(1.0, 0.6, 1.4, 1.0), (4.6, 2.8, 5.0, 3.2)])
-    truth = np.stack([np.linspace(2.3, 2.6, 4), np.full(4, 2.0), np.zeros(4)], axis=1)
-    handed, verified = [], []
-
-    def update(pose, scan, **kw):
-        handed.append(np.array(pose, float))
-        verified.append(bool(kw["pose_verified"]))
-        return []
-
-    mapper = _MaskingMapOnly(grid, [(-1.0, -1.0, 7.0, 5.0)])
-    mapper.update = update
-    loc = ScriptedLocalizer(truth, confident_at=range(4), bias=np.array([0.03, -0.01, 0.005]))
-    stack = LocalizationStack(loc, None, mapper, FusionConfig(
-        use_scan_matcher=False, align_masked="all", align_masked_fallback=fallback,
-        mask_withheld=False, mask_offset_objects=False))
-    stack.begin_run(1)
-    out = [stack.step(make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi,
-                                max_range_m=8.0, odom_pose_xytheta=truth[i],
-                                stamp_s=float(i))) for i in range(4)]
-    outcomes = [o.align_outcome for o in out]
-    if not fallback:
-        assert outcomes == ["confirmed"] + ["few_points"] * 3
-        assert verified == [True, False, False, False]
-        return
-    assert outcomes == ["confirmed"] * 4 and all(verified)
-    assert np.all(np.hypot(*(np.array(handed)[:, :2] - truth[:, :2]).T) < 0.01)
 
 
 def test_the_alignment_keeps_the_returns_of_an_object_missing_it_by_an_offset():
