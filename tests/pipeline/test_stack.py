@@ -1547,7 +1547,7 @@ def test_with_align_masked_all_gatmo_takes_the_masked_scan_s_confirmation():
     truth, _, out_off, handed_off, verified_off = _masked_run("off", box_m=0.6)
     assert [o.align_outcome for o in out_off[1:]] == ["low_fitness"] * 5
     assert not verified_off[1:].any()
-    _, _, out_pub, handed_pub, verified_pub = _masked_run("publish", box_m=0.6)
+    _, _, _, handed_pub, verified_pub = _masked_run("publish", box_m=0.6)
     np.testing.assert_array_equal(handed_pub, handed_off)
     np.testing.assert_array_equal(verified_pub, verified_off)
     _, _, out, handed, verified = _masked_run("all", box_m=0.6)
