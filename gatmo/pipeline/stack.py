@@ -1062,7 +1062,7 @@ class LocalizationStack:
             # the filter updates only every update_min_d of travel; between its confident
             # updates the matcher's pose stays precise for a while (confident_for_m), and the
             # scan-to-map alignment below checks every such pose directly
-            aligned_scan = (self._alignment_scan(scan, masked)
+            aligned_scan = (self._alignment_scan(scan, masked, withheld)
                             if self.fusion.align_masked == "all" else scan)
             pose_ok = is_confident(est, self.fusion, strict=True) or (
                 self._travel_since_reset_m <= self.fusion.confident_for_m)
@@ -1081,11 +1081,12 @@ class LocalizationStack:
                 verified = aligner.last_verified
                 align_outcome = publish_outcome = aligner.last_outcome
                 publish_confirmed = self._tight_confirmed(map_pose)
-                if self.fusion.align_masked == "publish" and self._withheld_beyond_offsets(
-                        withheld):
+                masked_scan = (self._alignment_scan(scan, masked, withheld)
+                               if self.fusion.align_masked == "publish" else scan)
+                if masked_scan is not scan:
                     # the returns the localizer does not weigh pull the alignment too; GATMO
                     # keeps the full scan's verdict (docs/experiments.md, sixty-first session)
-                    masked_pose, _ = aligner.refine(pose, self._alignment_scan(scan, masked))
+                    masked_pose, _ = aligner.refine(pose, masked_scan)
                     publish_outcome = aligner.last_outcome
                     publish_confirmed = self._tight_confirmed(masked_pose)
             if pose_ok:
@@ -1215,21 +1216,19 @@ class LocalizationStack:
         ranges[withheld] = np.nan
         return replace(scan, ranges_m=ranges), withheld
 
-    def _withheld_beyond_offsets(self, withheld: np.ndarray | None) -> bool:
-        """The scan had returns withheld (``withheld`` (B,) bool or None) other than the
-        offset objects' that :meth:`_alignment_scan` puts back."""
+    def _alignment_scan(self, scan: Scan, masked: Scan, withheld: np.ndarray | None) -> Scan:
+        """``align_masked``: the scan the alignment is handed, ``masked`` (``withheld`` (B,)
+        bool or None: its withheld beams) with the returns of objects that miss it by an
+        offset (``offset_at``) put back: where the map is right they are the scan's evidence
+        that the pose is off (withheld too, the halls' ATE before anything moved rose 0.029 ->
+        0.030 m; docs/experiments.md, sixty-first session). ``scan`` itself where no other
+        returns were withheld."""
         if withheld is None:
-            return False
-        return self._offset_beams is None or bool((withheld & ~self._offset_beams).any())
-
-    def _alignment_scan(self, scan: Scan, masked: Scan) -> Scan:
-        """``align_masked``: the scan the alignment is handed, ``masked`` with the returns of
-        objects that miss it by an offset (``offset_at``) put back: where the map is right
-        they are the scan's evidence that the pose is off (withheld too, the halls' ATE
-        before anything moved rose 0.029 -> 0.030 m; docs/experiments.md, sixty-first
-        session)."""
+            return scan
         if self._offset_beams is None:
             return masked
+        if not (withheld & ~self._offset_beams).any():
+            return scan
         ranges = masked.ranges_m.copy()
         ranges[self._offset_beams] = scan.ranges_m[self._offset_beams]
         return replace(masked, ranges_m=ranges)

@@ -1575,7 +1575,7 @@ def test_the_alignment_keeps_the_returns_of_an_object_missing_it_by_an_offset():
     scan = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
                      odom_pose_xytheta=pose, stamp_s=0.0)
     masked, withheld = stack._masked(scan)
-    aligned = stack._alignment_scan(scan, masked)
+    aligned = stack._alignment_scan(scan, masked, withheld)
     ends = transform_points(pose, scan.points_base_xy(only_valid=False))
     on_unmapped, on_box = mapper.unexplained_at(ends), near_box(ends)
     assert on_unmapped.sum() >= 5 and on_box.sum() >= 5
