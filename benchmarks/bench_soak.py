@@ -76,6 +76,12 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
             est = static.update(s.odom_pose_xytheta, s)
             static_err.append(np.hypot(*(est.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
         om = mapper.object_map
+        census = map_census(om, ties, doc, k + 1)
+        # of the stale objects, those the next run's localizer leaves out of its map
+        # (gatmo.withhold_unseen_runs: no return has confirmed them for that many runs)
+        n_unseen = cfg.gatmo.withhold_unseen_runs
+        stale_withheld = sum(1 for o in om.objects if o.id in set(census["stale_ids"])
+                             and n_unseen is not None and o.unseen_runs >= n_unseen)
         rows.append({
             "run": k + 1,
             "pieces_in_world": len(doc["runs"][k]["objects"]),
@@ -92,8 +98,8 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
             "moved": score["moved"], "found": score["found"],
             "false_relocations": score["false_relocations"],
             "map_correct_fraction": score["map_correct_fraction"],
-            **{key: v for key, v in map_census(om, ties, doc, k + 1).items()
-               if key != "stale_ids"},
+            **{key: v for key, v in census.items() if key != "stale_ids"},
+            "stale_withheld": stale_withheld,
             "seen_through_scans": mapper.counts["seen_through_scans"] - seen0,
             **why,
         })
@@ -156,6 +162,10 @@ def summary(rows: list[dict], first: int = 10) -> dict:
             # over the window says more than the last run's count
             "duplicate_mean": float(np.mean([r["duplicate"] for r in sel])),
             "stale_mean": float(np.mean([r["stale"] for r in sel])),
+            # of them, left out of the next run's localizer map (rows before the sixty-third
+            # session have no such count)
+            "stale_withheld_mean": float(np.mean([r.get("stale_withheld", np.nan)
+                                                  for r in sel])),
         }
     out["stale_why_sum"] = {k: int(sum(r.get(k, 0) for r in rows))
                             for k in ("stale_at_start", "stale_absent", "stale_unseen",

@@ -25,6 +25,11 @@ def test_short_soak_keeps_objects_memory_and_time_bounded(tmp_path):
         assert r["stale_at_start"] == (r["stale_absent"] + r["stale_unseen"]
                                        + r["stale_no_evidence"] + r["stale_partial"])
         assert 0 < r["seen_through_scans"] <= 100  # 10 s at 10 Hz
+        # withheld (unseen for withhold_unseen_runs, 2 in the simulated configuration) is a
+        # part of stale, and after one run no object can have gone unseen for two
+        assert 0 <= r["stale_withheld"] <= r["stale"]
+        if r["run"] == 1:
+            assert r["stale_withheld"] == 0
     # relocations scored per run (time per scan is the benchmark's business, not a test's)
     assert sum(r["false_relocations"] for r in rows) <= 1
 
@@ -44,7 +49,11 @@ def test_soak_summary_averages_the_maps_census_over_each_window_of_runs():
 
     # one chain's swing: the last run's 3 duplicates are one draw of 0-3
     rows = [row(1, 0, 2), row(2, 1, 4), row(3, 0, 5), row(4, 3, 7)]
+    for r, w in zip(rows, (0, 0, 2, 4), strict=True):
+        r["stale_withheld"] = w
     s = summary(rows, first=2)
+    assert s["runs 1-2"]["stale_withheld_mean"] == 0.0
+    assert s["runs 3-4"]["stale_withheld_mean"] == 3.0
     assert s["runs 1-2"]["duplicate_mean"] == 0.5 and s["runs 1-2"]["stale_mean"] == 3.0
     assert s["runs 3-4"]["duplicate_mean"] == 1.5 and s["runs 3-4"]["stale_mean"] == 6.0
     assert s["duplicate"] == [0, 3] and s["stale"] == [2, 7]  # first and last run
