@@ -79,9 +79,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
         census = map_census(om, ties, doc, k + 1)
         # of the stale objects, those the next run's localizer leaves out of its map
         # (gatmo.withhold_unseen_runs: no return has confirmed them for that many runs)
-        n_unseen = cfg.gatmo.withhold_unseen_runs
-        stale_withheld = sum(1 for o in om.objects if o.id in set(census["stale_ids"])
-                             and n_unseen is not None and o.unseen_runs >= n_unseen)
+        stale_withheld = len(set(census["stale_ids"]) & mapper.withheld_ids())
         rows.append({
             "run": k + 1,
             "pieces_in_world": len(doc["runs"][k]["objects"]),

@@ -247,6 +247,12 @@ class GatmoMapper:
         return {o.id for o in self.object_map.placed()
                 if not o.structure and o.unseen_runs >= n}
 
+    def withheld_ids(self) -> set[int]:
+        """Ids of the placed objects the localizer's map leaves out (``withhold_unseen_runs``):
+        after :meth:`end_run`, those the next run starts without; during a run, those no scan
+        has seen standing yet."""
+        return set(self._withheld)
+
     def _withheld_idx(self) -> list[int]:
         """Indices (into ``object_map.objects``) of the withheld objects not placed by
         evidence this run."""
