@@ -155,11 +155,18 @@ def simulate(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 3,
     bag: Annotated[bool, typer.Option("--bag", help="Also write a ROS 2 bag per run.")] = False,
 ) -> None:
-    """Simulate a rearranged-room scenario: map, logs, ground truth and scenario.json."""
-    from gatmo.datasets.sim import simulate_scenario
+    """Simulate a rearranged-room scenario: map, logs, ground truth, scenario.json and
+    stack.yaml (the stack configuration matched to the simulated robot)."""
+    from gatmo.pipeline.runs import simulate as run_simulate
 
-    result = simulate_scenario(out, preset=preset, runs=runs, seed=seed, bag=bag)
+    result, stack_yaml = run_simulate(out, preset=preset, runs=runs, seed=seed, bag=bag)
     _print_mapping(f"scenario {preset} seed {seed} -> {out}", result.summary())
+    logs = " ".join(str(p) for p in result.logs)
+    gts = " ".join(f"--ground-truth {p}" for p in result.gt)
+    _console().print(
+        f"compare on it: gatmo compare {logs} --map {result.map_yaml} "
+        f"--scenario {result.scenario_json} --config {stack_yaml} {gts} --out {out}-compare",
+        soft_wrap=True)
 
 
 # ----------------------------------------------------------------------- localize
@@ -221,6 +228,14 @@ def run(
         )
     for row in summary.rows:
         _print_mapping(f"gatmo run -> {out}", row)
+    _print_warnings(summary.warnings)
+
+
+def _print_warnings(lines: list[str]) -> None:
+    from rich.markup import escape
+
+    for line in lines:
+        _console().print(f"[yellow]warning:[/yellow] {escape(line)}", soft_wrap=True)
 
 
 def _print_compare(result) -> None:
@@ -232,7 +247,7 @@ def _print_compare(result) -> None:
         ("ate_max_m", "max m", "{:.2f}"), ("lost_fraction", "lost", "{:.1%}"),
         ("rel_trans_mean_m", "rel m", "{:.3f}"), ("rel_rot_mean_deg", "rel deg", "{:.2f}"),
         ("absent", "absent", "{}"), ("relocated", "relocated", "{}"), ("added", "added", "{}"),
-        ("ms_per_scan", "ms/scan", "{:.1f}"),
+        ("gatmo_trusted_fraction", "trusted", "{:.0%}"), ("ms_per_scan", "ms/scan", "{:.1f}"),
     ]
     present = [c for c in cols if any(c[0] in r for r in result.rows)]
     table = Table(title="static localizer vs gatmo (localizer + scan matcher + object map)")
@@ -254,6 +269,7 @@ def _print_compare(result) -> None:
         table.add_row(*row)
     console = _console()
     console.print(table)
+    _print_warnings(result.warnings)
     console.print(f"summary: {result.out_dir / 'summary.json'}")
     for p in result.pictures:
         console.print(f"picture: {p}")

@@ -349,6 +349,10 @@ def score(trace: RunTrace, gt: GroundTruth | None, relations=None) -> dict:
             rel_rot_mean_deg=r["rot_mean_deg"],
             rel_used=r["n_used"],
         )
+    if trace.side == "gatmo" and trace.gatmo_poses_xytheta is not None and len(trace.stamps_s):
+        # the share of scans whose pose the stack trusted enough to hand GATMO: none, and the
+        # object map cannot change (untrusted_logs says so to the user)
+        row["gatmo_trusted_fraction"] = float(np.mean(np.isfinite(trace.gatmo_poses_xytheta[:, 0])))
     kinds = [e.get("kind") for e in trace.events]
     row.update(
         absent=kinds.count("absent"),
@@ -359,6 +363,33 @@ def score(trace: RunTrace, gt: GroundTruth | None, relations=None) -> dict:
         relocalizations=trace.relocalizations,
     )
     return row
+
+
+#: below this share of a log's scans handed to GATMO as trusted, the user is told why the
+#: object map (nearly) did not change
+UNTRUSTED_WARN_FRACTION = 0.01
+
+
+def untrusted_logs(rows: list, cfg) -> list[str]:
+    """One line per full-stack row of ``rows`` (as :func:`score` makes them) whose GATMO was
+    handed fewer than :data:`UNTRUSTED_WARN_FRACTION` of the scans as trusted: the
+    localizer's cloud seldom or never passed GATMO's strict test (``fusion.absence_max_std_*``),
+    so the object map could hardly change, whatever moved. ``cfg``: the stack config run."""
+    f = cfg.fusion
+    out = []
+    for r in rows:
+        frac = r.get("gatmo_trusted_fraction")
+        if frac is None or frac >= UNTRUSTED_WARN_FRACTION:
+            continue
+        n = round(frac * r["scans"])
+        out.append(
+            f"{r['log']}: GATMO was handed {n} of {r['scans']} scans as trusted: the "
+            f"localizer's cloud was {'never' if n == 0 else 'seldom'} within "
+            f"{f.absence_max_std_xy_m:g} m / "
+            f"{f.absence_max_std_theta_deg:g} deg (fusion.absence_max_std_xy_m / _theta_deg), "
+            "so the object map could hardly change. A sensor model and odometry noise matched "
+            "to the robot tighten it (a simulated scenario's: --config SCENARIO/stack.yaml)")
+    return out
 
 
 def error_series(trace: RunTrace, gt: GroundTruth) -> np.ndarray:
@@ -418,9 +449,10 @@ def _make_mapper(cfg, grid: OccupancyGrid, objects_path: Path | None):
 class RunSummary:
     rows: list
     out_dir: Path
+    warnings: list = field(default_factory=list)  # untrusted_logs
 
     def as_dict(self) -> dict:
-        return {"out_dir": str(self.out_dir), "logs": self.rows}
+        return {"out_dir": str(self.out_dir), "logs": self.rows, "warnings": self.warnings}
 
 
 def run_gatmo(
@@ -462,7 +494,8 @@ def run_gatmo(
     write_trace(trace, out)
     write_object_map(mapper, base, out, _base_meta(Path(map_yaml), base))
     gt = ground_truth_of(scans, log, None)
-    return RunSummary([score(trace, gt)], out)
+    rows = [score(trace, gt)]
+    return RunSummary(rows, out, untrusted_logs(rows, cfg))
 
 
 # ------------------------------------------------------------------------------ compare
@@ -475,11 +508,13 @@ class CompareResult:
     traces: dict = field(default_factory=dict)  # (log index, side) -> RunTrace
     # the static side ran its own amcl section (out_dir/static_amcl.yaml), not the stack's
     static_amcl: bool = False
+    warnings: list = field(default_factory=list)  # untrusted_logs
 
     def as_dict(self) -> dict:
         return {"out_dir": str(self.out_dir), "logs": self.rows, "overall": self.overall,
                 "pictures": [str(p) for p in self.pictures],
-                "static_config": "static_amcl.yaml" if self.static_amcl else "config.yaml"}
+                "static_config": "static_amcl.yaml" if self.static_amcl else "config.yaml",
+                "warnings": self.warnings}
 
 
 def _overall(rows: list) -> dict:
@@ -490,7 +525,7 @@ def _overall(rows: list) -> dict:
             continue
         scans = np.array([r["scans"] for r in rs], dtype=float)
         o = {"logs": len(rs), "scans": int(scans.sum())}
-        for key in ("ate_rmse_m", "lost_fraction", "ms_per_scan"):
+        for key in ("ate_rmse_m", "lost_fraction", "ms_per_scan", "gatmo_trusted_fraction"):
             vals = [r.get(key) for r in rs]
             if all(v is not None for v in vals):
                 v = np.array(vals, dtype=float)
@@ -631,12 +666,13 @@ def compare(
             traces[(k, "static")] = t_static
             traces[(k, "gatmo")] = t_gatmo
         result = CompareResult(out, rows, _overall(rows), pics, traces,
-                               static_amcl=static_amcl is not None)
+                               static_amcl=static_amcl is not None,
+                               warnings=untrusted_logs(rows, cfg))
         atomic_write_text(
             out / "summary.json", json.dumps(result.as_dict(), indent=2, default=_json_default)
         )
     return CompareResult(out, rows, _overall(rows), pics, traces,
-                         static_amcl=static_amcl is not None)
+                         static_amcl=static_amcl is not None, warnings=untrusted_logs(rows, cfg))
 
 
 def _run_number(log, default: int) -> int:
@@ -667,20 +703,41 @@ __all__ = [
 
 
 # --------------------------------------------------------------------------------- demo
-def demo(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: int = 3,
-         progress: Progress | None = None) -> CompareResult:
-    """``gatmo demo``: simulate the default scenario, then compare static vs gatmo on it."""
-    from gatmo.datasets.sim import simulate_scenario
+#: the stack configuration ``simulate`` writes beside a scenario (sim_stack_config)
+SCENARIO_STACK_YAML = "stack.yaml"
 
-    out = Path(out_dir)
+
+def simulate(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: int = 3,
+             bag: bool = False, sim_config=None):
+    """``gatmo simulate``: a scenario (:func:`gatmo.datasets.sim.simulate_scenario`) and beside
+    it ``stack.yaml``, the stack configuration matched to the simulated robot
+    (:func:`gatmo.pipeline.config.sim_stack_config`: its odometry noise, a sensor model sharp
+    enough for GATMO's pose test, the true start pose's small cloud), for ``--config``.
+    ``sim_config``: the simulator's :class:`gatmo.datasets.sim.SimConfig` (default: the
+    preset's). Returns ``(ScenarioResult, path of stack.yaml)``."""
+    from gatmo.config import dump_model
+    from gatmo.datasets.sim import simulate_scenario
     from gatmo.pipeline.config import sim_stack_config
 
-    scen = simulate_scenario(out / "scenario", preset=preset, runs=runs, seed=seed)
+    scen = simulate_scenario(out_dir, preset=preset, runs=runs, seed=seed, bag=bag,
+                             config=sim_config)
+    stack_yaml = scen.out_dir / SCENARIO_STACK_YAML
+    atomic_write_text(stack_yaml, dump_model(sim_stack_config(), comments=True))
+    return scen, stack_yaml
+
+
+def demo(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: int = 3,
+         progress: Progress | None = None) -> CompareResult:
+    """``gatmo demo``: simulate the default scenario, then compare static vs gatmo on it with
+    the scenario's ``stack.yaml``, as a user would (``gatmo simulate`` then ``gatmo compare
+    --config``)."""
+    out = Path(out_dir)
+    scen, stack_yaml = simulate(out / "scenario", preset=preset, runs=runs, seed=seed)
     return compare(
         scen.map_yaml,
         scen.logs,
         out / "compare",
         scenario_json=scen.scenario_json,
         progress=progress,
-        config=sim_stack_config(),
+        config_path=stack_yaml,
     )

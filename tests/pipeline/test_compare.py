@@ -105,6 +105,58 @@ def test_log_that_does_not_overlap_the_map_is_refused(scen, tmp_path, capsys):
     assert "does not overlap the map" in err or "outside the map" in err
 
 
+def test_simulate_writes_the_matched_stack_config_and_compare_warns_without_it(tmp_path,
+                                                                              capsys):
+    # a user's path: gatmo simulate, then gatmo compare on what it wrote. AMCL's defaults
+    # (alphas 0.2, a flat model, a 0.5 m initial cloud) never let the cloud pass GATMO's
+    # strict test in a simulated hall, so the full stack is the static localizer to the digit;
+    # the stack.yaml the scenario carries (the simulated robot's odometry noise) does
+    from gatmo.pipeline.config import load_stack_config, sim_stack_config
+    from gatmo.pipeline.runs import simulate
+
+    cfg = SimConfig.for_preset("hall")
+    cfg.robot.duration_s = 20.0
+    scen, stack_yaml = simulate(tmp_path / "s", runs=1, seed=5, sim_config=cfg)
+    assert stack_yaml == scen.out_dir / "stack.yaml"
+    assert load_stack_config(stack_yaml) == sim_stack_config()
+    args = [str(scen.logs[0]), "--map", str(scen.map_yaml), "--scenario",
+            str(scen.scenario_json)]
+    capsys.readouterr()
+    assert main(["compare", *args, "--out", str(tmp_path / "plain")]) == 0
+    out = capsys.readouterr().out
+    plain = json.loads((tmp_path / "plain" / "summary.json").read_text())
+    static, full = plain["logs"]
+    assert full["gatmo_trusted_fraction"] == 0.0 and "gatmo_trusted_fraction" not in static
+    assert full["ate_rmse_m"] == static["ate_rmse_m"]
+    assert len(plain["warnings"]) == 1 and plain["warnings"][0].startswith("run_1.clf: ")
+    assert "warning: run_1.clf: GATMO was handed 0 of" in out and "stack.yaml" in out
+
+    assert main(["compare", *args, "--config", str(stack_yaml), "--out",
+                 str(tmp_path / "matched")]) == 0
+    out = capsys.readouterr().out
+    matched = json.loads((tmp_path / "matched" / "summary.json").read_text())
+    static, full = matched["logs"]
+    assert full["gatmo_trusted_fraction"] > 0.2 and matched["warnings"] == []
+    assert full["ate_rmse_m"] < static["ate_rmse_m"] < plain["logs"][0]["ate_rmse_m"]
+    assert full["absent"] + full["relocated"] + full["added"] > 0
+    assert "warning" not in out
+
+
+def test_untrusted_logs_names_each_full_stack_log_gatmo_got_no_trusted_scans_of():
+    from gatmo.pipeline.config import StackConfig
+    from gatmo.pipeline.runs import untrusted_logs
+
+    rows = [{"log": "a.clf", "side": "static", "scans": 100},
+            {"log": "a.clf", "side": "gatmo", "scans": 100, "gatmo_trusted_fraction": 0.3},
+            {"log": "b.clf", "side": "gatmo", "scans": 200, "gatmo_trusted_fraction": 0.005},
+            {"log": "c.clf", "side": "gatmo", "scans": 50, "gatmo_trusted_fraction": 0.0}]
+    lines = untrusted_logs(rows, StackConfig())
+    assert len(lines) == 2
+    assert lines[0].startswith("b.clf: GATMO was handed 1 of 200 scans") and "seldom" in lines[0]
+    assert lines[1].startswith("c.clf: GATMO was handed 0 of 50 scans") and "never" in lines[1]
+    assert "0.1 m / 3 deg" in lines[1]
+
+
 def test_map_render_from_known_poses(scen, tmp_path):
     out = tmp_path / "m.yaml"
     assert main(["map", "render", str(scen.logs[0]), "--out", str(out)]) == 0
