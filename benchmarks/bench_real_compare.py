@@ -35,39 +35,11 @@ KEYS = ("ate_rmse_m", "ate_median_m", "lost_fraction", "rel_trans_mean_m", "rel_
 
 
 def real_log_config(demo_model: bool = False):
-    """One configuration for the three logs: the demo's filter settings (update every 0.1 m /
-    0.1 rad, 500-3000 particles) with AMCL's default odometry alphas (0.2) and, unless
-    ``demo_model``, AMCL's default likelihood field (sigma_hit 0.2 m, z_hit 0.5, z_rand 0.5).
-    The demo's sharper likelihood_field_prob with sigma_hit 0.1 m (tuned on the simulator's 4 m
-    laser) loses the robot on ACES and MIT, whose beams reach 50-80 m: a fraction of a degree is
-    a metre there."""
-    from gatmo.pipeline.config import sim_stack_config
+    """The configuration for the three logs (:func:`gatmo.pipeline.config.real_stack_config`;
+    ``demo_model``: its sharp model with the anchor filter, the CLI's ``--preset real``)."""
+    from gatmo.pipeline.config import real_stack_config
 
-    cfg = sim_stack_config()
-    a = cfg.amcl
-    a.alpha1 = a.alpha2 = a.alpha3 = a.alpha4 = 0.2
-    # AMCL's initial cloud (0.5 m / 15 deg std), not the simulator's: the README's figures
-    amcl = type(a)()
-    a.initial_cov_xx_m2, a.initial_cov_yy_m2, a.initial_cov_aa_rad2 = (
-        amcl.initial_cov_xx_m2, amcl.initial_cov_yy_m2, amcl.initial_cov_aa_rad2)
-    if not demo_model:
-        a.laser_model, a.sigma_hit_m, a.z_hit, a.z_rand = "likelihood_field", 0.2, 0.5, 0.5
-    # the extent test's threshold is set for the simulator's maps (every cell a piece overlaps
-    # occupied); on Intel's map, drawn from the returns, the demo configuration refused with it
-    # the two small relocations (8 and 10 cm, half a turn) and moved a third piece 0.38 m
-    # instead (docs/experiments.md, thirty-sixth session): off here, as in GatmoConfig
-    cfg.gatmo.match_extent_check = False
-    # the anchor filter runs AMCL's flat model beside a sharp one: beside the flat default it
-    # would be a second draw of the same filter
-    cfg.fusion.anchor_filter = demo_model
-    # the pose the alignment confirmed, carried by these wheels (AMCL's alphas, four times the
-    # simulator's), is trusted half as long as in the halls: 0.1 m of error per metre, not
-    # 0.05 (MIT CSAIL 0.065 -> 0.064 m ATE, Intel and ACES the same or lower; chosen on these
-    # three logs from the two values, docs/experiments.md, fifty-ninth session)
-    cfg.fusion.publish_blend_odom_std_per_m = 0.1
-    # a start pose given with AMCL's 0.5 m cloud is no anchor; not measured on these logs
-    cfg.fusion.publish_blend_from_start = False
-    return cfg
+    return real_stack_config(sharp_model=demo_model)
 
 
 def intel_reference_scans() -> list:

@@ -400,11 +400,25 @@ def config_dump(
         bool, typer.Option("--comments/--no-comments",
                            help="Write each parameter's description above it.")
     ] = True,
+    preset: Annotated[
+        str | None, typer.Option("--preset", help="stack only: amcl (AMCL's defaults) | sim "
+                                 "(matched to gatmo's simulator) | real (the real logs' "
+                                 "configuration)")
+    ] = None,
 ) -> None:
-    """Print a component's full configuration as YAML (defaults, or as loaded from --params),
-    each parameter with its description as a comment."""
+    """Print a component's full configuration as YAML (defaults, as loaded from --params, or a
+    named --preset), each parameter with its description as a comment."""
     from gatmo.config import dump_model
     from gatmo.errors import ConfigError
+
+    if preset is not None:
+        if component != "stack" or params is not None:
+            raise ConfigError("a stack configuration's name: give it with `stack` and without "
+                              "--params", field="--preset")
+        from gatmo.pipeline.config import stack_preset
+
+        sys.stdout.write(dump_model(stack_preset(preset), comments=comments))
+        return
 
     if component == "amcl":
         from gatmo.localization.config import AmclConfig

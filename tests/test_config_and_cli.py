@@ -171,6 +171,39 @@ def test_cli_config_dump_writes_descriptions(capsys):
     assert capsys.readouterr().out == dump_model(GatmoConfig())
 
 
+def test_cli_config_dump_stack_presets_load_back_as_the_named_configurations(tmp_path, capsys):
+    from gatmo.pipeline.config import (
+        STACK_PRESETS,
+        StackConfig,
+        load_stack_config,
+        real_stack_config,
+        sim_stack_config,
+    )
+
+    expected = {"amcl": StackConfig(), "sim": sim_stack_config(), "real": real_stack_config()}
+    assert set(expected) == set(STACK_PRESETS)
+    for name, cfg in expected.items():
+        assert main(["config", "dump", "stack", "--preset", name]) == 0
+        p = tmp_path / f"{name}.yaml"
+        p.write_text(capsys.readouterr().out)
+        assert load_stack_config(p) == cfg, name
+    real = expected["real"]
+    # the real logs' configuration: AMCL's wheels and initial cloud, the sharp model with the
+    # anchor filter on AMCL's flat one beside it
+    assert (real.amcl.alpha1, real.amcl.laser_model, real.amcl.sigma_hit_m) == (
+        0.2, "likelihood_field_prob", 0.1)
+    assert real.amcl.initial_cov_xx_m2 == StackConfig().amcl.initial_cov_xx_m2
+    assert real.fusion.anchor_filter and real.fusion.anchor_laser_model == "likelihood_field"
+    flat = real_stack_config(sharp_model=False)
+    assert flat.amcl.laser_model == "likelihood_field" and not flat.fusion.anchor_filter
+    # a preset names a stack configuration only, and an unknown one is one line, exit 1
+    assert main(["config", "dump", "stack", "--preset", "nope"]) == 1
+    assert main(["config", "dump", "amcl", "--preset", "sim"]) == 1
+    err = capsys.readouterr().err
+    assert "unknown preset 'nope': amcl | sim | real" in err and "--preset" in err
+    assert "Traceback" not in err
+
+
 @pytest.mark.parametrize("user", [None, "ACTIVE"])
 def test_importing_gatmo_makes_openmp_wait_passively_unless_the_user_said_otherwise(user):
     """numba's OpenMP threads spin while idle by default, and two gatmo processes on the same

@@ -388,7 +388,8 @@ def untrusted_logs(rows: list, cfg) -> list[str]:
             f"{f.absence_max_std_xy_m:g} m / "
             f"{f.absence_max_std_theta_deg:g} deg (fusion.absence_max_std_xy_m / _theta_deg), "
             "so the object map could hardly change. A sensor model and odometry noise matched "
-            "to the robot tighten it (a simulated scenario's: --config SCENARIO/stack.yaml)")
+            "to the robot tighten it: `gatmo config dump stack --preset real` for a real "
+            "laser, a simulated scenario's stack.yaml (--config)")
     return out
 
 
