@@ -142,6 +142,36 @@ def test_simulate_writes_the_matched_stack_config_and_compare_warns_without_it(t
     assert "warning" not in out
 
 
+DATA = __import__("pathlib").Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+@pytest.mark.skipif(not (DATA / "slam-benchmark" / "intel.sort.bag").exists()
+                    or not (DATA / "radish-corrected").exists(),
+                    reason="../shared/data (the Intel log and its corrected poses) not found")
+def test_real_intel_gatmo_acts_with_the_real_preset_and_warns_on_amcl_s_defaults(tmp_path,
+                                                                               capsys):
+    # the Intel lab, its first 600 scans, as a user runs it: AMCL's defaults never let the
+    # cloud within GATMO's 0.1 m (README, "Real logs"), the real preset does
+    from gatmo.pipeline.mapping import render_reference_map
+
+    map_yaml = tmp_path / "map.yaml"
+    render_reference_map(DATA / "radish-corrected" / "intel-corrected.log.gz", map_yaml)
+    assert main(["config", "dump", "stack", "--preset", "real"]) == 0
+    (tmp_path / "real.yaml").write_text(capsys.readouterr().out)
+    args = ["run", "--map", str(map_yaml), "--log", str(DATA / "slam-benchmark" /
+            "intel.sort.bag"), "--initial-pose", "0.6,-0.03,-0.35", "--max-scans", "600"]
+    assert main([*args, "--out", str(tmp_path / "amcl")]) == 0
+    out = capsys.readouterr().out
+    assert "warning: intel.sort.bag: GATMO was handed 0 of 600 scans" in out
+    assert "--preset real" in out
+    from gatmo.pipeline.runs import run_gatmo
+
+    res = run_gatmo(map_yaml, DATA / "slam-benchmark" / "intel.sort.bag", tmp_path / "real",
+                    config_path=tmp_path / "real.yaml", initial_pose=[0.6, -0.03, -0.35],
+                    max_scans=600)
+    assert res.warnings == [] and res.rows[0]["gatmo_trusted_fraction"] > 0.2
+
+
 def test_untrusted_logs_names_each_full_stack_log_gatmo_got_no_trusted_scans_of():
     from gatmo.pipeline.config import StackConfig
     from gatmo.pipeline.runs import untrusted_logs

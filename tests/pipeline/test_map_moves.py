@@ -152,15 +152,15 @@ def test_real_intel_a_piece_moved_in_the_map_is_found_where_the_log_shows_it(tmp
     # the Intel lab's map (rendered from the corrected log) with a 0.6 m piece moved 2.46 m
     # and turned 10.6 deg, as trial 0 of `bench_real_moves --logs intel` drew
     # it; the bag's first 700 scans pass both places
-    from benchmarks.bench_real_compare import real_log_config
     from gatmo.maps.io import load_map
+    from gatmo.pipeline.config import real_stack_config
     from gatmo.pipeline.mapping import render_reference_map
     from gatmo.pipeline.runs import _make_mapper, load_scans, run_full
 
     render_reference_map(DATA / "radish-corrected" / "intel-corrected.log.gz",
                          tmp_path / "map.yaml")
     grid = load_map(tmp_path / "map.yaml")
-    cfg = real_log_config(demo_model=True)
+    cfg = real_stack_config()
     om = ObjectMap.from_grid(grid, cfg.gatmo)
     piece = min((o for o in om.objects if not o.structure),
                 key=lambda o: np.hypot(*(o.cells_world().mean(axis=0) - [10.930, -0.999])))
