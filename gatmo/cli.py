@@ -176,6 +176,10 @@ def localize(
     log: Annotated[Path, typer.Option("--log", help="Log or bag with scans and odometry.")],
     out: Annotated[Path, typer.Option("--out", help="Output TUM trajectory.")],
     params: ParamsOpt = None,
+    config: Annotated[
+        Path | None, typer.Option("--config", help="gatmo stack YAML: its amcl section (e.g. a "
+                                  "simulated scenario's stack.yaml); --params wins over it.")
+    ] = None,
     initial_pose: PoseOpt = None,
     global_loc: GlobalOpt = False,
     fmt: FormatOpt = None,
@@ -190,6 +194,7 @@ def localize(
             map_yaml,
             log,
             params_path=params,
+            config_path=config,
             fmt=fmt,
             initial_pose=_parse_pose(initial_pose),
             global_localization=global_loc,

@@ -33,6 +33,7 @@ def run_localize(
     *,
     out_path: str | Path,
     params_path: str | Path | None = None,
+    config_path: str | Path | None = None,
     fmt: str | None = None,
     initial_pose=None,
     global_localization: bool = False,
@@ -42,7 +43,11 @@ def run_localize(
     config=None,
 ) -> LocalizeSummary:
     """Localize ``log`` in the map; the initial pose comes from the argument, else the params
-    file, else the log's first ground-truth pose, else global localization."""
+    file, else the log's first ground-truth pose, else global localization. The localizer's
+    configuration: ``config`` (an :class:`AmclConfig`), else the ROS AMCL YAML
+    ``params_path``, else the ``amcl`` section of the gatmo stack YAML ``config_path`` (what
+    ``gatmo run --config`` takes, e.g. a simulated scenario's ``stack.yaml``), else AMCL's
+    defaults."""
     from gatmo.datasets.tum import write_tum
     from gatmo.localization.config import AmclConfig
     from gatmo.localization.mcl import MonteCarloLocalizer
@@ -57,7 +62,16 @@ def run_localize(
     )
 
     grid = load_map(map_yaml)
-    cfg = config or (load_amcl_yaml(params_path) if params_path else AmclConfig())
+    if config is not None:
+        cfg = config
+    elif params_path is not None:
+        cfg = load_amcl_yaml(params_path)
+    elif config_path is not None:
+        from gatmo.pipeline.config import load_stack_config
+
+        cfg = load_stack_config(config_path).amcl
+    else:
+        cfg = AmclConfig()
     scans = load_scans(log, fmt, max_scans)
     loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(seed))
     pose0 = initial_pose_for(scans, initial_pose, global_localization, cfg.initial_pose_xytheta)

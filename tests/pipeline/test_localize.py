@@ -40,3 +40,28 @@ def test_localize_refuses_pose_in_a_wall(tmp_path, capsys):
     assert rc == 1
     err = capsys.readouterr().err
     assert "initial pose" in err and "Traceback" not in err
+
+
+def test_localize_takes_the_amcl_section_of_a_stack_config(tmp_path):
+    # a simulated scenario's stack.yaml serves `gatmo localize --config` as it serves `gatmo
+    # run`: the poses are those of its amcl section, given as an AMCL config; --params wins
+    from gatmo.pipeline.config import sim_stack_config
+    from gatmo.pipeline.localize import run_localize
+    from gatmo.pipeline.runs import simulate
+
+    cfg = SimConfig.for_preset("hall")
+    cfg.robot.duration_s = 12.0
+    scen, stack_yaml = simulate(tmp_path / "s", runs=1, seed=2, sim_config=cfg)
+    args = ["localize", "--map", str(scen.map_yaml), "--log", str(scen.logs[0])]
+    assert main([*args, "--config", str(stack_yaml), "--out", str(tmp_path / "c.tum")]) == 0
+    run_localize(scen.map_yaml, scen.logs[0], out_path=tmp_path / "a.tum",
+                 config=sim_stack_config().amcl)
+    assert main([*args, "--out", str(tmp_path / "d.tum")]) == 0
+    params = tmp_path / "amcl.yaml"
+    params.write_text("amcl:\n  ros__parameters:\n    alpha1: 0.2\n")
+    assert main([*args, "--config", str(stack_yaml), "--params", str(params),
+                 "--out", str(tmp_path / "p.tum")]) == 0
+    poses = {k: read_tum(tmp_path / f"{k}.tum")[1] for k in "cadp"}
+    assert np.array_equal(poses["c"], poses["a"])
+    assert not np.array_equal(poses["c"], poses["d"])  # AMCL's defaults: another filter
+    assert np.array_equal(poses["p"], poses["d"])  # the AMCL file alone, as without --config
