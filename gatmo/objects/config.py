@@ -191,12 +191,6 @@ class GatmoConfig(GatmoModel):
         "try, a small piece onto part of a larger one seen from one side; at 9 (the paper: 10 "
         "to 70 scans to identify) false relocations per run fall 0.61 -> 0.40 (full stack, "
         "seeds 300-319) and 0.60 -> 0.45 (true poses, held-out seeds 100-109)")
-    chair_register_m: float = Field(
-        0.0, ge=0, le=0.1, description="beyond the paper: each observation of a track, from its "
-        "third on, is shifted by at most this much [m] per axis (in 1 cm steps) onto the evidence "
-        "its earlier observations gathered, before its cells are counted; the pose jitter "
-        "between scans (1-2 cm) otherwise smears a chair's faces over two rows of cells. The "
-        "person hypothesis keeps the raw points. 0: off")
     chair_min_cells: int = Field(
         6, ge=1, description="chair cells (Metaobject.chair_points: evidence cells hit in 2 "
         "scans or more) a track needs before it is matched, joins Gamma or becomes a "

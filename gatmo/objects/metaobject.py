@@ -13,48 +13,6 @@ from filterpy.kalman import KalmanFilter
 BODY_SPREAD_M = 0.2
 
 
-#: registration_offset: the step of its search and the cell of its fine grid [m], and the
-#: blur of the earlier returns on that grid (the jitter between scans is 1-2 cm)
-REGISTER_STEP_M = 0.01
-REGISTER_BLUR_M = 0.015
-
-
-def registration_offset(reference_xy: np.ndarray, points_xy: np.ndarray,
-                        reach_m: float) -> np.ndarray:
-    """The shift (2,) [m], at most ``reach_m`` per axis in steps of :data:`REGISTER_STEP_M`,
-    that lands ``points_xy`` (K, 2; world frame) on the most of ``reference_xy`` (M, 2; a
-    track's earlier returns, already registered), these drawn on a 1 cm grid blurred by
-    :data:`REGISTER_BLUR_M` and read by bilinear interpolation. Each shift's score is weighed
-    by a gaussian of its length (sigma twice ``reach_m``), so a face that could slide along itself
-    stays where it is; no reference near the points: no shift."""
-    from scipy.ndimage import gaussian_filter, map_coordinates
-
-    zero = np.zeros(2)
-    if len(reference_xy) == 0 or len(points_xy) == 0:
-        return zero
-    h = REGISTER_STEP_M
-    margin = reach_m + 4 * REGISTER_BLUR_M
-    lo_xy, hi_xy = points_xy.min(axis=0) - margin, points_xy.max(axis=0) + margin
-    ref = reference_xy[np.all((reference_xy >= lo_xy) & (reference_xy <= hi_xy), axis=1)]
-    if len(ref) == 0:
-        return zero
-    shape = np.ceil((hi_xy - lo_xy) / h).astype(int) + 1  # (nx, ny)
-    ij = np.floor((ref - lo_xy) / h).astype(int)
-    grid = np.zeros((shape[1], shape[0]))
-    np.add.at(grid, (ij[:, 1], ij[:, 0]), 1.0)
-    grid = gaussian_filter(grid, REGISTER_BLUR_M / h, mode="constant")
-    n = int(round(reach_m / h))
-    steps = np.arange(-n, n + 1) * h
-    offs = np.array([(dx, dy) for dx in steps for dy in steps])  # (O, 2)
-    q = (points_xy[None, :, :] + offs[:, None, :] - lo_xy) / h - 0.5  # fine-grid index (x, y)
-    vals = map_coordinates(grid, [q[..., 1].ravel(), q[..., 0].ravel()], order=1,
-                           mode="constant").reshape(len(offs), len(points_xy)).sum(axis=1)
-    vals *= np.exp(-0.5 * np.sum(offs**2, axis=1) / (2 * reach_m) ** 2)
-    if float(vals.max()) <= 0:
-        return zero
-    return offs[int(np.argmax(vals))].copy()
-
-
 class Metaobject:
     """One tracked cluster. ``points`` are world points (K, 2) of its first observation."""
 
@@ -146,15 +104,12 @@ class Metaobject:
 
     def _add(self, points: np.ndarray, stamp_s: float, verified: bool = True) -> None:
         c = points.mean(axis=0)
-        if self.n_obs:
-            self.kf.update(c)
-        self.centres.append(c)  # the person hypothesis keeps the raw points
-        reach = float(getattr(self.cfg, "chair_register_m", 0.0))
-        if reach > 0 and self.n_obs >= 2:
-            points = points + registration_offset(np.vstack(self.scan_points), points, reach)
         self.scan_points.append(np.asarray(points, dtype=float).copy())
         if len(self.scan_points) > 48:
             self.scan_points = self.scan_points[::2]
+        if self.n_obs:
+            self.kf.update(c)
+        self.centres.append(c)
         keys = {tuple(k) for k in self._keys(points).tolist()}
         for k in keys:
             self.evidence[k] = self.evidence.get(k, 0) + 1

@@ -313,46 +313,6 @@ def test_person_hypothesis_wins_for_walking_legs_and_chair_for_a_still_box():
     assert chair.dominant() == "chair"
 
 
-def test_registration_recovers_a_known_shift_and_leaves_a_face_sliding_along_itself():
-    from gatmo.objects.metaobject import registration_offset
-
-    rng = np.random.default_rng(4)
-    near = np.stack([np.linspace(1.0, 1.5, 12), np.full(12, 2.0)], 1)
-    side = np.stack([np.full(12, 1.5), np.linspace(2.0, 2.5, 12)], 1)
-    corner = np.vstack([near, side])
-    ref = np.vstack([corner + rng.normal(0, 0.003, corner.shape) for _ in range(6)])
-    assert np.allclose(registration_offset(ref, corner + [0.018, -0.013], 0.03), [-0.02, 0.01])
-    assert np.allclose(registration_offset(ref, corner, 0.03), [0.0, 0.0])
-    # a face alone is pinned across itself; along it only its ends say anything
-    dx, dy = registration_offset(ref, near + [0.0, 0.02], 0.03)
-    assert dy == pytest.approx(-0.02) and abs(dx) <= 0.01
-    # nothing to register onto: no shift
-    assert np.allclose(registration_offset(ref, corner + [5.0, 5.0], 0.03), [0.0, 0.0])
-
-
-@pytest.mark.parametrize("reach", [0.0, 0.03])
-def test_registered_observations_keep_a_jittered_box_on_one_row_of_cells(reach):
-    # a 0.6 m box's corner seen in 15 scans whose poses jitter by 1.5 cm (a steady offset
-    # per scan, as a pose error is): registered onto the track's earlier returns, its faces
-    # stay one cell thick; the person hypothesis keeps the raw centres either way
-    cfg = CFG.model_copy(update={"chair_register_m": reach})
-    rng = np.random.default_rng(7)
-    near = np.stack([np.linspace(2.0, 2.6, 16), np.full(16, 3.012)], 1)
-    side = np.stack([np.full(16, 2.612), np.linspace(3.0, 3.6, 16)], 1)
-    corner = np.vstack([near, side])
-    shifts = rng.normal(0.0, 0.015, (15, 2))
-    m = Metaobject(1, corner + shifts[0], 0.0, cfg, 0.05)
-    for k in range(1, 15):
-        m.update(corner + shifts[k], 0.1 * k)
-    rows = {round(y, 3) for x, y in m.chair_points() if x < 2.5}
-    assert np.allclose(np.array(m.centres) - corner.mean(axis=0), shifts)
-    # the corner's two faces cover 25 cells one cell thick
-    if reach:
-        assert len(rows) == 1 and len(m.chair_points()) <= 30
-    else:  # the jitter smears the faces over two rows of cells
-        assert len(rows) == 2 and len(m.chair_points()) >= 45
-
-
 def _two_pieces_track(cfg, origin_xy=(0.0, 0.0)) -> Metaobject:
     """One track of a box and a chair 1.2 m apart seen by a robot driving past: first only the
     box, then both, then only the chair (12 scans each)."""
