@@ -712,18 +712,24 @@ def simulate(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: 
              bag: bool = False, sim_config=None):
     """``gatmo simulate``: a scenario (:func:`gatmo.datasets.sim.simulate_scenario`) and beside
     it ``stack.yaml``, the stack configuration matched to the simulated robot
-    (:func:`gatmo.pipeline.config.sim_stack_config`: its odometry noise, a sensor model sharp
-    enough for GATMO's pose test, the true start pose's small cloud), for ``--config``.
+    (:func:`gatmo.pipeline.config.sim_stack_config` with the odometry alphas of the
+    simulator's config: a sensor model sharp enough for GATMO's pose test, the true start
+    pose's small cloud), for ``--config``.
     ``sim_config``: the simulator's :class:`gatmo.datasets.sim.SimConfig` (default: the
     preset's). Returns ``(ScenarioResult, path of stack.yaml)``."""
     from gatmo.config import dump_model
-    from gatmo.datasets.sim import simulate_scenario
+    from gatmo.datasets.sim import SimConfig, simulate_scenario
     from gatmo.pipeline.config import sim_stack_config
 
     scen = simulate_scenario(out_dir, preset=preset, runs=runs, seed=seed, bag=bag,
                              config=sim_config)
+    stack = sim_stack_config()
+    # the filter assumes the wheels' noise this simulator draws (Thrun's alphas, as AMCL's)
+    odom = (SimConfig.for_preset(preset) if sim_config is None else sim_config).odom
+    for k in ("alpha1", "alpha2", "alpha3", "alpha4"):
+        setattr(stack.amcl, k, getattr(odom, k))
     stack_yaml = scen.out_dir / SCENARIO_STACK_YAML
-    atomic_write_text(stack_yaml, dump_model(sim_stack_config(), comments=True))
+    atomic_write_text(stack_yaml, dump_model(stack, comments=True))
     return scen, stack_yaml
 
 

@@ -119,6 +119,12 @@ def test_simulate_writes_the_matched_stack_config_and_compare_warns_without_it(t
     scen, stack_yaml = simulate(tmp_path / "s", runs=1, seed=5, sim_config=cfg)
     assert stack_yaml == scen.out_dir / "stack.yaml"
     assert load_stack_config(stack_yaml) == sim_stack_config()
+    # a simulator whose wheels are noisier: the scenario's filter assumes its alphas
+    noisy = cfg.model_copy(deep=True)
+    noisy.odom.alpha1, noisy.odom.alpha3 = 0.1, 0.08
+    _, noisy_yaml = simulate(tmp_path / "noisy", runs=1, seed=5, sim_config=noisy)
+    a = load_stack_config(noisy_yaml).amcl
+    assert (a.alpha1, a.alpha2, a.alpha3, a.alpha4) == (0.1, 0.01, 0.08, 0.01)
     args = [str(scen.logs[0]), "--map", str(scen.map_yaml), "--scenario",
             str(scen.scenario_json)]
     capsys.readouterr()
