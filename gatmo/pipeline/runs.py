@@ -372,8 +372,8 @@ UNTRUSTED_WARN_FRACTION = 0.01
 
 def untrusted_logs(rows: list, cfg) -> list[str]:
     """One line per full-stack row of ``rows`` (as :func:`score` makes them) whose GATMO was
-    handed fewer than :data:`UNTRUSTED_WARN_FRACTION` of the scans as trusted: the
-    localizer's cloud seldom or never passed GATMO's strict test (``fusion.absence_max_std_*``),
+    handed fewer than :data:`UNTRUSTED_WARN_FRACTION` of the scans as trusted (mostly: the
+    localizer's cloud seldom or never passed GATMO's strict test, ``fusion.absence_max_std_*``),
     so the object map could hardly change, whatever moved. ``cfg``: the stack config run."""
     f = cfg.fusion
     out = []
@@ -383,13 +383,12 @@ def untrusted_logs(rows: list, cfg) -> list[str]:
             continue
         n = round(frac * r["scans"])
         out.append(
-            f"{r['log']}: GATMO was handed {n} of {r['scans']} scans as trusted: the "
-            f"localizer's cloud was {'never' if n == 0 else 'seldom'} within "
-            f"{f.absence_max_std_xy_m:g} m / "
-            f"{f.absence_max_std_theta_deg:g} deg (fusion.absence_max_std_xy_m / _theta_deg), "
-            "so the object map could hardly change. A sensor model and odometry noise matched "
-            "to the robot tighten it: `gatmo config dump stack --preset real` for a real "
-            "laser, a simulated scenario's stack.yaml (--config)")
+            f"{r['log']}: GATMO was handed {n} of {r['scans']} scans as trusted, so the object "
+            "map could hardly change. It takes a scan only from a pose whose particle cloud "
+            f"is within {f.absence_max_std_xy_m:g} m / {f.absence_max_std_theta_deg:g} deg "
+            "(fusion.absence_max_std_xy_m / _theta_deg). A sensor model and odometry noise "
+            "matched to the robot tighten the cloud: `gatmo config dump stack --preset real` "
+            "for a real laser, a simulated scenario's stack.yaml (--config)")
     return out
 
 

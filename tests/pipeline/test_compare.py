@@ -188,9 +188,9 @@ def test_untrusted_logs_names_each_full_stack_log_gatmo_got_no_trusted_scans_of(
             {"log": "c.clf", "side": "gatmo", "scans": 50, "gatmo_trusted_fraction": 0.0}]
     lines = untrusted_logs(rows, StackConfig())
     assert len(lines) == 2
-    assert lines[0].startswith("b.clf: GATMO was handed 1 of 200 scans") and "seldom" in lines[0]
-    assert lines[1].startswith("c.clf: GATMO was handed 0 of 50 scans") and "never" in lines[1]
-    assert "0.1 m / 3 deg" in lines[1]
+    assert lines[0].startswith("b.clf: GATMO was handed 1 of 200 scans as trusted")
+    assert lines[1].startswith("c.clf: GATMO was handed 0 of 50 scans as trusted")
+    assert "within 0.1 m / 3 deg" in lines[1] and "--preset real" in lines[1]
 
 
 def test_map_render_from_known_poses(scen, tmp_path):
