@@ -121,13 +121,14 @@ def _print_mapping(title: str, rows: dict) -> None:
 @app.command()
 def info(
     file: Annotated[
-        Path, typer.Argument(help="Log, bag, map YAML, wean.dat, TUM, relations or "
-                             "objects.json.")
+        Path, typer.Argument(help="Log, bag, map YAML, wean.dat, TUM, relations, "
+                             "objects.json, scenario.json, stack config or AMCL YAML.")
     ],
     fmt: FormatOpt = None,
 ) -> None:
     """Summarise a data file: sensor, beams, FOV, range, scans, duration, path, topics; an
-    object map's objects by list and runs."""
+    object map's objects by list and runs; a scenario's changes per run; a configuration's
+    models and the preset it is."""
     from gatmo.datasets.info import summarize
 
     summary = summarize(file, fmt=fmt)

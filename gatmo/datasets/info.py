@@ -37,17 +37,82 @@ def _objects_summary(path: Path) -> dict:
     return out
 
 
+def _scenario_summary(path: Path) -> dict:
+    from gatmo.datasets.sim import load_scenario
+    from gatmo.errors import FormatError
+
+    doc = load_scenario(path)
+    runs = doc["runs"]
+    if not isinstance(runs, list) or not all(
+            isinstance(r, dict) and isinstance(r.get("changes", []), list)
+            and all(isinstance(c, dict) for c in r.get("changes", []))
+            and isinstance(r.get("people", []), list) for r in runs) or not isinstance(
+            doc["map_objects"], list):
+        raise FormatError("runs must be a list of runs with lists of changes and people, "
+                          "map_objects a list", file=path, field="runs")
+    changes: dict[str, list[int]] = {}
+    for k, run in enumerate(doc["runs"]):
+        for ch in run.get("changes", []):
+            kinds = changes.setdefault(ch.get("kind", "?"), [0] * len(doc["runs"]))
+            kinds[k] += 1
+    return {"kind": "scenario", "preset": doc.get("preset"), "seed": doc.get("seed"),
+            "runs": len(doc["runs"]), "map_objects": len(doc["map_objects"]),
+            "scans_per_run": [r.get("scans") for r in doc["runs"]],
+            **{f"{kind}_per_run": n for kind, n in sorted(changes.items())},
+            "people_per_run": [len(r.get("people", [])) for r in doc["runs"]]}
+
+
+def _json_summary(path: Path) -> dict:
+    """An objects.json or a scenario.json, told apart by their ``format`` field."""
+    import json
+
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        doc = None  # load_objects words the error
+    if isinstance(doc, dict) and doc.get("format") == "gatmo-scenario":
+        return _scenario_summary(path)
+    return _objects_summary(path)
+
+
+def _yaml_summary(path: Path) -> dict:
+    """A map_server map YAML, a gatmo stack configuration (``gatmo config dump stack``) or a
+    ROS AMCL parameter file, told apart by their top-level keys."""
+    from gatmo.config import read_yaml
+
+    data, _ = read_yaml(path)
+    if isinstance(data, dict) and "image" not in data:
+        from gatmo.pipeline.config import StackConfig
+
+        # Nav2 nests its parameters under `<node>: ros__parameters:`; ROS 1 is flat
+        nav2 = any(isinstance(v, dict) and "ros__parameters" in v for v in data.values())
+        if data and not nav2 and set(data) <= set(StackConfig.model_fields):
+            from gatmo.pipeline.config import load_stack_config, summarize_stack_config
+
+            return summarize_stack_config(load_stack_config(path))
+        if nav2 or any(str(k).startswith(("laser_", "odom_")) for k in data):
+            from gatmo.localization.params import load_amcl_yaml
+
+            a = load_amcl_yaml(path)
+            return {"kind": "AMCL parameters", "laser_model": a.laser_model,
+                    "sigma_hit_m": a.sigma_hit_m, "z_hit / z_rand": [a.z_hit, a.z_rand],
+                    "alphas": [a.alpha1, a.alpha2, a.alpha3, a.alpha4],
+                    "particles": [a.min_particles, a.max_particles],
+                    "update_min_d_m / _a_rad": [a.update_min_d_m, a.update_min_a_rad]}
+    from gatmo.maps.io import load_map
+
+    return _grid_summary(load_map(path))
+
+
 def summarize(path: str | Path, fmt: str | None = None) -> dict:
-    """A dict describing a log, bag, map YAML, wean.dat, TUM, relations or objects.json
-    file."""
+    """A dict describing a log, bag, map YAML, wean.dat, TUM, relations, objects.json or
+    scenario.json file, a gatmo stack configuration or a ROS AMCL parameter file."""
     p = Path(path)
     name = p.name
     if name.endswith(".json"):
-        return _objects_summary(p)
+        return _json_summary(p)
     if name.endswith((".yaml", ".yml")):
-        from gatmo.maps.io import load_map
-
-        return _grid_summary(load_map(p))
+        return _yaml_summary(p)
     if name.startswith("wean.dat"):
         from gatmo.datasets.wean import load_wean_map
 

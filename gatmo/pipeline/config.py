@@ -210,9 +210,34 @@ def stack_preset(name: str):
     raise ConfigError(f"unknown preset {name!r}: {' | '.join(STACK_PRESETS)}", field="preset")
 
 
+def summarize_stack_config(cfg) -> dict:
+    """What ``gatmo info`` says of a stack configuration: the localizer's sensor and motion
+    models, whether GATMO can act (its strict test), the named preset it is, if any, and how
+    many parameters differ from AMCL's defaults (:class:`StackConfig`)."""
+    a, f = cfg.amcl, cfg.fusion
+    same = [name for name in STACK_PRESETS if stack_preset(name) == cfg]
+    return {"kind": "stack config", "preset": same[0] if same else "none",
+            "parameters_not_amcl_defaults": _differences(cfg.model_dump(),
+                                                         StackConfig().model_dump()),
+            "laser_model": a.laser_model, "sigma_hit_m": a.sigma_hit_m,
+            "alphas": [a.alpha1, a.alpha2, a.alpha3, a.alpha4],
+            "initial_std_xy_m": round(math.sqrt(a.initial_cov_xx_m2), 4),
+            "anchor_filter": f.anchor_filter,
+            "gatmo_needs_cloud_within": f"{f.absence_max_std_xy_m:g} m / "
+                                        f"{f.absence_max_std_theta_deg:g} deg",
+            "seed": cfg.seed}
+
+
+def _differences(a, b) -> int:
+    if isinstance(a, dict) and isinstance(b, dict):
+        return sum(_differences(a.get(k), b.get(k)) for k in set(a) | set(b))
+    return int(a != b)
+
+
 def dump_stack_config(cfg) -> str:
     return dump_model(cfg)
 
 
 __all__ = ["STACK_PRESETS", "StackConfig", "dump_stack_config", "load_stack_config",
-           "real_stack_config", "sim_stack_config", "stack_config_class", "stack_preset"]
+           "real_stack_config", "sim_stack_config", "stack_config_class", "stack_preset",
+           "summarize_stack_config"]

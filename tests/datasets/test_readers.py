@@ -208,3 +208,44 @@ def test_truncated_gzip_is_a_format_error(tmp_path):
 
     with pytest.raises(FormatError, match="corrupt"):
         list(WeanLog(p))
+
+
+def test_info_tells_a_scenario_a_stack_config_and_ros_amcl_files_from_maps(tmp_path):
+    # every file `gatmo simulate` writes, and the configurations `gatmo run` takes, are
+    # summarised by what they are, not refused as a map or an objects.json
+    from gatmo.config import dump_model
+    from gatmo.datasets.sim import SimConfig
+    from gatmo.pipeline.config import StackConfig, real_stack_config
+    from gatmo.pipeline.runs import simulate
+
+    cfg = SimConfig.for_preset("hall")
+    cfg.robot.duration_s = 5.0
+    scen, stack_yaml = simulate(tmp_path / "s", runs=2, seed=5, sim_config=cfg)
+    s = summarize(scen.scenario_json)
+    assert (s["kind"], s["preset"], s["seed"], s["runs"]) == ("scenario", "hall", 5, 2)
+    assert s["scans_per_run"] == [50, 50] and s["map_objects"] > 10
+    assert sum(sum(v) for k, v in s.items() if k.endswith("_per_run") and k != "people_per_run"
+               and k != "scans_per_run") > 0  # changes by kind, per run
+    s = summarize(stack_yaml)
+    assert (s["kind"], s["preset"], s["laser_model"]) == ("stack config", "sim",
+                                                        "likelihood_field_prob")
+    assert s["gatmo_needs_cloud_within"] == "0.1 m / 3 deg"
+    assert s["parameters_not_amcl_defaults"] > 0
+    one = StackConfig()
+    one.amcl.alpha1 = 0.3
+    for name, c, preset, n in (("amcl", StackConfig(), "amcl", 0), ("one", one, "none", 1),
+                               ("real", real_stack_config(), "real", None)):
+        (tmp_path / f"{name}.yaml").write_text(dump_model(c, comments=True))
+        s = summarize(tmp_path / f"{name}.yaml")
+        assert s["preset"] == preset and (n is None or s["parameters_not_amcl_defaults"] == n)
+    (tmp_path / "nav2.yaml").write_text("amcl:\n  ros__parameters:\n    z_hit: 0.95\n"
+                                        "    alpha1: 0.05\n")
+    (tmp_path / "ros1.yaml").write_text("laser_z_hit: 0.9\nodom_alpha1: 0.1\n")
+    nav2, ros1 = summarize(tmp_path / "nav2.yaml"), summarize(tmp_path / "ros1.yaml")
+    assert nav2["kind"] == ros1["kind"] == "AMCL parameters"
+    assert nav2["alphas"][0] == 0.05 and nav2["z_hit / z_rand"][0] == 0.95
+    assert ros1["alphas"][0] == 0.1 and ros1["z_hit / z_rand"][0] == 0.9
+    assert summarize(scen.map_yaml)["kind"] == "map"
+    (tmp_path / "junk.yaml").write_text("foo: 1\n")
+    with pytest.raises(FormatError, match="image"):  # nothing it knows: the map's error
+        summarize(tmp_path / "junk.yaml")

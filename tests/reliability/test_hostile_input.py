@@ -114,3 +114,25 @@ def test_objects_json(tmp_path, obj, version):
            "next_id": 3, "objects": [obj]}
     (tmp_path / "o.json").write_text(json.dumps(doc))
     _only_gatmo_errors(lambda: load_objects(tmp_path / "o.json"))
+
+
+@SETTINGS
+@given(fields=st.dictionaries(st.sampled_from(["amcl", "gatmo", "fusion", "icp", "seed",
+                                               "image", "laser_z_hit", "odom_alpha1", "bogus"]),
+                              YAML_VALUES | st.dictionaries(
+                                  st.sampled_from(["ros__parameters", "alpha1", "z_hit",
+                                                   "laser_model", "passes", "bogus"]),
+                                  YAML_VALUES | JSONISH, max_size=3), max_size=5),
+       runs=JSONISH)
+def test_info_on_any_yaml_and_scenario_json(tmp_path, fields, runs):
+    # gatmo info tells a map, a stack config, an AMCL file, a scenario and an objects.json
+    # apart by their keys: whichever it takes a file for, the outcome is a summary or one line
+    import yaml
+
+    from gatmo.datasets.info import summarize
+
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(fields))
+    _only_gatmo_errors(lambda: summarize(tmp_path / "c.yaml"))
+    doc = {"format": "gatmo-scenario", "runs": runs, "map_objects": runs}
+    (tmp_path / "s.json").write_text(json.dumps(doc))
+    _only_gatmo_errors(lambda: summarize(tmp_path / "s.json"))
