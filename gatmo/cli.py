@@ -34,6 +34,11 @@ ParamsOpt = Annotated[Path | None, typer.Option("--params", help="AMCL parameter
 ConfigOpt = Annotated[
     Path | None, typer.Option("--config", help="gatmo stack YAML (gatmo config dump stack).")
 ]
+PresetOpt = Annotated[
+    str | None, typer.Option("--preset", help="a named stack configuration instead of --config: "
+                             "amcl (AMCL's defaults) | sim (gatmo's simulator) | real (the real "
+                             "logs')")
+]
 PoseOpt = Annotated[str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")]
 GlobalOpt = Annotated[bool, typer.Option("--global", help="Global localization.")]
 
@@ -181,6 +186,7 @@ def localize(
         Path | None, typer.Option("--config", help="gatmo stack YAML: its amcl section (e.g. a "
                                   "simulated scenario's stack.yaml); --params wins over it.")
     ] = None,
+    preset: PresetOpt = None,
     initial_pose: PoseOpt = None,
     global_loc: GlobalOpt = False,
     fmt: FormatOpt = None,
@@ -196,6 +202,7 @@ def localize(
             log,
             params_path=params,
             config_path=config,
+            preset=preset,
             fmt=fmt,
             initial_pose=_parse_pose(initial_pose),
             global_localization=global_loc,
@@ -217,6 +224,7 @@ def run(
     ] = None,
     params: ParamsOpt = None,
     config: ConfigOpt = None,
+    preset: PresetOpt = None,
     initial_pose: PoseOpt = None,
     global_loc: GlobalOpt = False,
     fmt: FormatOpt = None,
@@ -229,8 +237,8 @@ def run(
     with bar:
         summary = run_gatmo(
             map_yaml, log, out, objects_path=objects, params_path=params, config_path=config,
-            initial_pose=_parse_pose(initial_pose), global_localization=global_loc, fmt=fmt,
-            max_scans=max_scans, progress=update,
+            preset=preset, initial_pose=_parse_pose(initial_pose),
+            global_localization=global_loc, fmt=fmt, max_scans=max_scans, progress=update,
         )
     for row in summary.rows:
         _print_mapping(f"gatmo run -> {out}", row)
@@ -288,6 +296,7 @@ def compare(
     out: Annotated[Path, typer.Option("--out", help="Output folder.")],
     params: ParamsOpt = None,
     config: ConfigOpt = None,
+    preset: PresetOpt = None,
     static_params: Annotated[
         Path | None, typer.Option("--static-params", help="AMCL parameter YAML for the static "
                                   "side only, e.g. the one your robot runs today (default: the "
@@ -332,7 +341,7 @@ def compare(
     bar, update = _progress("compare")
     with live as observer, bar:
         result = run_compare(
-            map_yaml, logs, out, params_path=params, config_path=config,
+            map_yaml, logs, out, params_path=params, config_path=config, preset=preset,
             initial_pose=_parse_pose(initial_pose), global_localization=global_loc,
             gt_paths=ground_truth, relations_path=relations, fmt=fmt, max_scans=max_scans,
             scenario_json=scenario, progress=update, observer=observer,

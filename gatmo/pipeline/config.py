@@ -33,14 +33,24 @@ def stack_config_class() -> type[StackConfig]:
     return StackConfig
 
 
-def load_stack_config(config_path: str | Path | None = None, params_path: str | Path | None = None):
+def load_stack_config(config_path: str | Path | None = None, params_path: str | Path | None = None,
+                      preset: str | None = None):
     """Load the stack config.
 
     ``config_path``: a gatmo stack YAML (sections amcl, gatmo, icp, fusion, seed), as written by
-    ``gatmo config dump stack``. ``params_path``: a ROS 1 / Nav2 AMCL YAML that replaces the
-    ``amcl`` section, so an AMCL user's file drops in unchanged.
+    ``gatmo config dump stack``; or ``preset``, a named one (:data:`STACK_PRESETS`), not both.
+    ``params_path``: a ROS 1 / Nav2 AMCL YAML that replaces the ``amcl`` section, so an AMCL
+    user's file drops in unchanged.
     """
-    cfg = load_model(StackConfig, config_path) if config_path is not None else StackConfig()
+    if preset is not None:
+        if config_path is not None:
+            from gatmo.errors import ConfigError
+
+            raise ConfigError("a named configuration or a file, not both (--config)",
+                              field="--preset")
+        cfg = stack_preset(preset)
+    else:
+        cfg = load_model(StackConfig, config_path) if config_path is not None else StackConfig()
     if params_path is not None:
         from gatmo.localization.params import load_amcl_yaml
 

@@ -34,6 +34,7 @@ def run_localize(
     out_path: str | Path,
     params_path: str | Path | None = None,
     config_path: str | Path | None = None,
+    preset: str | None = None,
     fmt: str | None = None,
     initial_pose=None,
     global_localization: bool = False,
@@ -46,8 +47,8 @@ def run_localize(
     file, else the log's first ground-truth pose, else global localization. The localizer's
     configuration: ``config`` (an :class:`AmclConfig`), else the ROS AMCL YAML
     ``params_path``, else the ``amcl`` section of the gatmo stack YAML ``config_path`` (what
-    ``gatmo run --config`` takes, e.g. a simulated scenario's ``stack.yaml``), else AMCL's
-    defaults."""
+    ``gatmo run --config`` takes, e.g. a simulated scenario's ``stack.yaml``) or of the named
+    stack configuration ``preset``, else AMCL's defaults."""
     from gatmo.datasets.tum import write_tum
     from gatmo.localization.config import AmclConfig
     from gatmo.localization.mcl import MonteCarloLocalizer
@@ -66,10 +67,10 @@ def run_localize(
         cfg = config
     elif params_path is not None:
         cfg = load_amcl_yaml(params_path)
-    elif config_path is not None:
+    elif config_path is not None or preset is not None:
         from gatmo.pipeline.config import load_stack_config
 
-        cfg = load_stack_config(config_path).amcl
+        cfg = load_stack_config(config_path, preset=preset).amcl
     else:
         cfg = AmclConfig()
     scans = load_scans(log, fmt, max_scans)

@@ -387,8 +387,8 @@ def untrusted_logs(rows: list, cfg) -> list[str]:
             "map could hardly change. It takes a scan only from a pose whose particle cloud "
             f"is within {f.absence_max_std_xy_m:g} m / {f.absence_max_std_theta_deg:g} deg "
             "(fusion.absence_max_std_xy_m / _theta_deg). A sensor model and odometry noise "
-            "matched to the robot tighten the cloud: `gatmo config dump stack --preset real` "
-            "for a real laser, a simulated scenario's stack.yaml (--config)")
+            "matched to the robot tighten the cloud: --preset real for a real laser, a "
+            "simulated scenario's stack.yaml (--config)")
     return out
 
 
@@ -463,6 +463,7 @@ def run_gatmo(
     objects_path: str | Path | None = None,
     params_path: str | Path | None = None,
     config_path: str | Path | None = None,
+    preset: str | None = None,
     initial_pose=None,
     global_localization: bool = False,
     fmt: str | None = None,
@@ -472,13 +473,14 @@ def run_gatmo(
 ) -> RunSummary:
     """``gatmo run``: the full stack on one log; writes poses.tum, objects.json, map, events.
     ``run_id``: the run's number in the object map's history and events; None: the one after
-    the last run laid on ``objects_path`` (1 on a fresh map)."""
+    the last run laid on ``objects_path`` (1 on a fresh map). ``preset``: a named stack
+    configuration (:data:`gatmo.pipeline.config.STACK_PRESETS`) instead of ``config_path``."""
     from gatmo.maps.io import load_map
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    cfg = load_stack_config(config_path, params_path)
+    cfg = load_stack_config(config_path, params_path, preset)
     atomic_write_text(out / "config.yaml", dump_stack_config(cfg))
     base = load_map(map_yaml)
     mapper = _make_mapper(cfg, base, Path(objects_path) if objects_path else None)
@@ -565,6 +567,7 @@ def compare(
     observer=None,
     static_params_path: str | Path | None = None,
     static_amcl=None,
+    preset: str | None = None,
 ) -> CompareResult:
     """``gatmo compare``: static localizer vs full stack on the same logs, same seeds.
 
@@ -573,7 +576,8 @@ def compare(
     :class:`gatmo.localization.config.AmclConfig`) gives it its own: the AMCL a robot runs
     today against gatmo's configuration. That section is then written to
     ``out_dir/static_amcl.yaml`` and named in ``summary.json``.
-    ``observer``: a live view (:class:`gatmo.pipeline.live.RerunObserver`) or None."""
+    ``observer``: a live view (:class:`gatmo.pipeline.live.RerunObserver`) or None.
+    ``preset``: a named stack configuration instead of ``config_path``."""
     from gatmo.maps.io import load_map
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
@@ -583,7 +587,7 @@ def compare(
         raise GatmoError(
             f"{len(gt_paths)} ground-truth files for {len(logs)} logs", field="--ground-truth"
         )
-    cfg = config if config is not None else load_stack_config(config_path, params_path)
+    cfg = config if config is not None else load_stack_config(config_path, params_path, preset)
     atomic_write_text(out / "config.yaml", dump_stack_config(cfg))
     if static_params_path is not None:
         from gatmo.localization.params import load_amcl_yaml

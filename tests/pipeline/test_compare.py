@@ -158,24 +158,28 @@ def test_real_intel_gatmo_acts_with_the_real_preset_and_warns_on_amcl_s_defaults
                                                                                capsys):
     # the Intel lab, its first 600 scans, as a user runs it: AMCL's defaults never let the
     # cloud within GATMO's 0.1 m (README, "Real logs"), the real preset does
+    from gatmo.pipeline.config import load_stack_config, real_stack_config
     from gatmo.pipeline.mapping import render_reference_map
+    from gatmo.pipeline.runs import run_gatmo
 
     map_yaml = tmp_path / "map.yaml"
     render_reference_map(DATA / "radish-corrected" / "intel-corrected.log.gz", map_yaml)
-    assert main(["config", "dump", "stack", "--preset", "real"]) == 0
-    (tmp_path / "real.yaml").write_text(capsys.readouterr().out)
     args = ["run", "--map", str(map_yaml), "--log", str(DATA / "slam-benchmark" /
             "intel.sort.bag"), "--initial-pose", "0.6,-0.03,-0.35", "--max-scans", "600"]
     assert main([*args, "--out", str(tmp_path / "amcl")]) == 0
     out = capsys.readouterr().out
     assert "warning: intel.sort.bag: GATMO was handed 0 of 600 scans" in out
     assert "--preset real" in out
-    from gatmo.pipeline.runs import run_gatmo
-
+    assert main([*args, "--preset", "real", "--out", str(tmp_path / "cli")]) == 0
+    assert "warning" not in capsys.readouterr().out
+    assert load_stack_config(tmp_path / "cli" / "config.yaml") == real_stack_config()
     res = run_gatmo(map_yaml, DATA / "slam-benchmark" / "intel.sort.bag", tmp_path / "real",
-                    config_path=tmp_path / "real.yaml", initial_pose=[0.6, -0.03, -0.35],
-                    max_scans=600)
+                    preset="real", initial_pose=[0.6, -0.03, -0.35], max_scans=600)
     assert res.warnings == [] and res.rows[0]["gatmo_trusted_fraction"] > 0.2
+    # a preset or a file, not both
+    assert main([*args, "--preset", "real", "--config", str(tmp_path / "cli" / "config.yaml"),
+                 "--out", str(tmp_path / "both")]) == 1
+    assert "not both" in capsys.readouterr().err
 
 
 def test_untrusted_logs_names_each_full_stack_log_gatmo_got_no_trusted_scans_of():

@@ -61,7 +61,9 @@ def test_localize_takes_the_amcl_section_of_a_stack_config(tmp_path):
     params.write_text("amcl:\n  ros__parameters:\n    alpha1: 0.2\n")
     assert main([*args, "--config", str(stack_yaml), "--params", str(params),
                  "--out", str(tmp_path / "p.tum")]) == 0
-    poses = {k: read_tum(tmp_path / f"{k}.tum")[1] for k in "cadp"}
-    assert np.array_equal(poses["c"], poses["a"])
+    # the simulator's preset is the scenario's stack.yaml, its default simulator's
+    assert main([*args, "--preset", "sim", "--out", str(tmp_path / "s.tum")]) == 0
+    poses = {k: read_tum(tmp_path / f"{k}.tum")[1] for k in "cadps"}
+    assert np.array_equal(poses["c"], poses["a"]) and np.array_equal(poses["c"], poses["s"])
     assert not np.array_equal(poses["c"], poses["d"])  # AMCL's defaults: another filter
     assert np.array_equal(poses["p"], poses["d"])  # the AMCL file alone, as without --config
