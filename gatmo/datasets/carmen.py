@@ -60,6 +60,8 @@ class CarmenLog:
         if self.skip_bad:
             stats.skip(f"line {lineno}: {msg}")
             return
+        if field is not None and msg.startswith(f"{field}: "):
+            msg = msg[len(field) + 2:]  # the error names the field itself: "file:line: field: "
         raise FormatError(msg, file=self.path, line=lineno, field=field)
 
     def _records(self, stats: ReadStats):

@@ -94,6 +94,8 @@ def test_carmen_bad_lines_name_file_and_line(tmp_path, text, line, cls):
     with pytest.raises(cls) as e:
         list(CarmenLog(p))
     assert e.value.line == line and e.value.file == str(p)
+    if e.value.field is not None:  # the message names the field once: "file:line: FLASER: ..."
+        assert str(e.value).count(f"{e.value.field}:") == 1, str(e.value)
     log = CarmenLog(p, skip_bad=True)
     list(log)
     assert log.stats.skipped == 1
