@@ -372,11 +372,6 @@ class GatmoConfig(GatmoModel):
         "Real logs with pieces moved in their maps: found 4 -> 10 of 36 (ACES 0 -> 5); ACES' "
         "unedited map ATE 0.078 -> 0.084 m; halls, offices, soak and the demo the same to "
         "the digit (fifty-fifth and fifty-sixth sessions)")
-    match_end_absent_to_gamma: bool = Field(
-        False, description="beyond the paper (experiment): at a run's end, before the chairs "
-        "seen this run and never matched join the map, each object noticed absent this run is "
-        "fitted to them (the tests of a match onto a Gamma object); the best fits relocate the "
-        "objects, each object and chair once, and those chairs are not added")
     match_retake_from_chair: bool = Field(
         True, description="beyond the paper: an object a track's chair took from A this "
         "run, farther than doubt_search_m (and its extent) from where it was absent, stays a "

@@ -400,8 +400,6 @@ class GatmoMapper:
         cells = {g.id: self._cells_if_stays(g) for g in seen}
         kept = [g for g in sorted(seen, key=lambda g: -len(g.shape_xy))
                 if cells[g.id] is not None]
-        if self.cfg.match_end_absent_to_gamma:
-            kept = self._match_absent_to_gamma(kept, events)
         taken = self._grid.occupied.copy()  # the map, and what is added below
         for o in kept:
             cy, cx = cells[o.id]
@@ -419,29 +417,6 @@ class GatmoMapper:
         self._withheld = self._unseen_ids()  # for the next run's localizer
         self._rerender()
         return events
-
-    def _match_absent_to_gamma(self, kept: list[MapObject], events) -> list[MapObject]:
-        """``match_end_absent_to_gamma``: the objects noticed absent this run fitted to the
-        chairs of this run about to join the map (``kept``); the best fits first
-        (:func:`_rank_key`), each object and each chair once. Returns the chairs left."""
-        fits = []
-        for o in self.object_map.A:
-            if o.structure or not self._placed_this_run(o):
-                continue
-            for g in kept:
-                if _larger_than(_diameter(g.shape_xy), o):
-                    continue  # what was seen is larger than the object
-                fit = self._fit_gamma_ranked(g, o)
-                if fit is not None:
-                    fits.append((fit[0], len(fits), o, g, fit[1]))
-        used: set[int] = set()
-        for _, _, o, g, mt in sorted(fits, key=lambda f: f[:2], reverse=True):
-            if o.id in used or g.id in used:
-                continue
-            used |= {o.id, g.id}
-            self.object_map.objects.remove(g)
-            self._relocate(o, mt, self._last_stamp, events)
-        return [g for g in kept if g.id not in used]
 
     def _add(self, o: MapObject, stamp_s, events) -> None:
         """A Gamma object ``o`` joins the map as a new object (in M)."""
