@@ -261,6 +261,7 @@ def _print_compare(result) -> None:
         ("ate_max_m", "max m", "{:.2f}"), ("lost_fraction", "lost", "{:.1%}"),
         ("rel_trans_mean_m", "rel m", "{:.3f}"), ("rel_rot_mean_deg", "rel deg", "{:.2f}"),
         ("absent", "absent", "{}"), ("relocated", "relocated", "{}"), ("added", "added", "{}"),
+        ("obj_moved", "moved", "{}"), ("obj_found", "found", "{}"),
         ("gatmo_trusted_fraction", "trusted", "{:.0%}"), ("ms_per_scan", "ms/scan", "{:.1f}"),
     ]
     present = [c for c in cols if any(c[0] in r for r in result.rows)]

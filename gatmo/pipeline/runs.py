@@ -541,6 +541,10 @@ def _overall(rows: list) -> dict:
                 o[key] = float(max(vals))
         for key in ("absent", "relocated", "added"):
             o[key] = int(sum(r.get(key, 0) for r in rs))
+        # with a scenario: the pieces moved and those found (right object, true pose)
+        for key in ("obj_moved", "obj_found", "obj_false_relocations"):
+            if all(key in r for r in rs):
+                o[key] = int(sum(r[key] for r in rs))
         out[side] = o
     return out
 

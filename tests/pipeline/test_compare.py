@@ -36,7 +36,14 @@ def test_compare_writes_summary_pictures_and_both_sides(scen, tmp_path, capsys):
     assert len(objs.objects) > 5
     assert load_map(out / "gatmo" / "02_run_2" / "map.yaml").cells.shape == \
         load_map(scen.map_yaml).cells.shape
-    assert "static localizer vs gatmo" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "static localizer vs gatmo" in out
+    # given the scenario, the pieces moved and found, per log and over all
+    full = [r for r in s["logs"] if r["side"] == "gatmo"]
+    assert s["overall"]["gatmo"]["obj_moved"] == sum(r["obj_moved"] for r in full) > 0
+    assert s["overall"]["gatmo"]["obj_found"] == sum(r["obj_found"] for r in full)
+    assert "obj_moved" not in s["overall"]["static"]
+    assert "moved" in out and "found" in out
 
 
 def test_run_writes_poses_objects_map_events_and_continues_from_objects(scen, tmp_path):
