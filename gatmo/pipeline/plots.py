@@ -77,7 +77,7 @@ def plot_log(out_dir: Path, base: OccupancyGrid, grid_before: OccupancyGrid, map
                              arrowprops={"arrowstyle": "->", "color": "tab:orange", "lw": 1.5})
         axes[1].text(p1[0], p1[1], f" {label}", fontsize=7, color="tab:orange")
     p = out_dir / "map.png"
-    fig.savefig(p, dpi=110)
+    fig.savefig(p, dpi=110, bbox_inches="tight")  # a wide map leaves bands above and below
     plt.close(fig)
     paths.append(p)
 
