@@ -81,7 +81,7 @@ def run_batch(spec_path: str | Path, out_dir: str | Path, *, backend: str = "loc
     if spec.command != "echo":
         for j in jobs:
             if j.point_hash not in stack_cfgs:
-                cfg = base_stack_config(j.params_path)
+                cfg = base_stack_config(j.params_path, j.preset)
                 apply_overrides(cfg, j.point)
                 stack_cfgs[j.point_hash] = cfg.model_dump(mode="json")
     code = source_fingerprint()

@@ -44,6 +44,9 @@ class BatchSpec(GatmoModel):
     logs: list[LogSpec] = Field(min_length=1)
     command: Literal["localize", "run", "compare", "echo"]
     params: str | None = None
+    # a named stack configuration the points start from (gatmo.pipeline.config.STACK_PRESETS)
+    # instead of the defaults; ``params`` still replaces its amcl section
+    preset: str | None = None
     grid: dict[str, list[Any]] = Field(default_factory=dict)
     seeds: list[int] = Field(default_factory=lambda: [0], min_length=1)
     max_scans: int | None = Field(default=None, gt=0)
@@ -66,6 +69,7 @@ class Job:
     max_scans: int | None
     folder: str  # relative to the batch output folder
     chain_pos: int = 0  # position in its chain (0 = first / unchained)
+    preset: str | None = None  # the named stack configuration the point starts from
 
     @property
     def log(self) -> str:
@@ -141,6 +145,12 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
                               line=lines.get(("params",)), field="params")
         params_path = str(q.resolve())
 
+    if spec.preset is not None:
+        from gatmo.pipeline.config import STACK_PRESETS
+
+        if spec.preset not in STACK_PRESETS:
+            raise ConfigError(f"unknown preset {spec.preset!r}: {' | '.join(STACK_PRESETS)}",
+                              file=spec_path, line=lines.get(("preset",)), field="preset")
     map_digest = {name: _map_digest(p) for name, p in maps.items()}
     params_digest = _digest([Path(params_path).read_bytes()]) if params_path else None
 
@@ -151,7 +161,7 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
                               line=lines.get(("grid", k)), field=f"grid.{k}")
     points = [tuple(zip(keys, vals, strict=True))
               for vals in itertools.product(*(spec.grid[k] for k in keys))]
-    _check_points(spec, points, params_path, spec_path, lines)
+    _check_points(spec, points, params_path, spec_path, lines, spec.preset)
 
     chains: list[list[Job]] = []
     for i, entry in enumerate(spec.logs):
@@ -174,13 +184,14 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
                     jid = _hash([spec.command, maps[_entry.map], map_digest[_entry.map],
                                  [[lg, *_stat(lg)] for lg in logs],
                                  [list(p) for p in _point], _seed, spec.max_scans,
-                                 params_path, params_digest, prev])
+                                 params_path, params_digest, prev]
+                                + ([spec.preset] if spec.preset is not None else []))
                     folder = f"{spec.command}/{label}/{_ph}/seed{_seed}"
                     if sub is not None:
                         folder += f"/{sub}"
                     return Job(jid, spec.command, _entry.map, maps[_entry.map], tuple(logs),
                                _entry.site, params_path, _point, _ph, _seed, spec.max_scans,
-                               folder, pos)
+                               folder, pos, spec.preset)
 
                 if spec.command == "compare":
                     chains.append([job(files, entry.site or entry.map)])
@@ -238,7 +249,7 @@ def _stat(path: str) -> list[int]:
     return [st.st_size, st.st_mtime_ns]
 
 
-def _check_points(spec, points, params_path, spec_path, lines) -> None:
+def _check_points(spec, points, params_path, spec_path, lines, preset=None) -> None:
     if spec.command == "echo":
         for k in spec.grid:
             if not k.startswith("echo."):
@@ -246,15 +257,16 @@ def _check_points(spec, points, params_path, spec_path, lines) -> None:
                                   line=lines.get(("grid", k)), field=f"grid.{k}")
         return
     for point in points:  # every value is validated before any job starts
-        cfg = base_stack_config(params_path)
+        cfg = base_stack_config(params_path, preset)
         apply_overrides(cfg, point, file=spec_path, lines=lines)
 
 
-def base_stack_config(params_path: str | None):
-    """The stack config every point starts from: defaults, AMCL section from ``params``."""
+def base_stack_config(params_path: str | None, preset: str | None = None):
+    """The stack config every point starts from: the defaults (or the named ``preset``), the
+    AMCL section from ``params``."""
     from gatmo.pipeline.config import load_stack_config
 
-    return load_stack_config(None, params_path)
+    return load_stack_config(None, params_path, preset)
 
 
 __all__ = ["BatchSpec", "Job", "LogSpec", "apply_overrides", "expand_jobs", "load_spec"]

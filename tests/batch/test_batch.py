@@ -77,6 +77,8 @@ seeds: [0, 1]
      "grid:\n  amcl.max_particles: [abc]\n", "grid.amcl.max_particles", 5),
     ("maps: {m: maps/m.yaml}\nlogs: [{map: m, glob: 'logs/*.log'}]\ncommand: echo\n"
      "seed: [1]\n", "seed", 4),
+    ("maps: {m: maps/m.yaml}\nlogs: [{map: m, glob: 'logs/*.log'}]\ncommand: run\n"
+     "preset: nope\n", "preset", 4),
 ])
 def test_bad_spec_names_the_key(tmp_path, text, field, line):
     _echo_world(tmp_path)

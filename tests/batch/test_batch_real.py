@@ -52,6 +52,31 @@ def test_localize_sweep_applies_the_grid(scenario, tmp_path):
     assert max(small) < min(big)
 
 
+def test_a_preset_is_the_configuration_every_point_starts_from(scenario, tmp_path):
+    # a fleet of simulated halls on AMCL's defaults hands GATMO nothing; `preset: sim` is the
+    # simulator's configuration, the grid still applied on top, and the jobs are others
+    from gatmo.pipeline.config import load_stack_config, sim_stack_config
+
+    plain = _spec(Path(scenario.out_dir), "run", grid="{amcl.max_particles: [2500]}")
+    preset = Path(scenario.out_dir) / "spec_preset.yaml"
+    preset.write_text(plain.read_text().replace("max_scans: 60", "max_scans: 200")
+                      + "preset: sim\n")
+    plain.write_text(plain.read_text().replace("max_scans: 60", "max_scans: 200"))
+    ids = {j.id for ch in expand_jobs(plain) for j in ch}
+    assert ids.isdisjoint(j.id for ch in expand_jobs(preset) for j in ch)
+    rows = {}
+    for name, spec in (("plain", plain), ("preset", preset)):
+        res = run_batch(spec, tmp_path / name, workers=1)
+        assert res.failed == 0
+        rows[name] = read_table(res.results_path)
+    assert all(float(r["gatmo_trusted_fraction"]) == 0.0 for r in rows["plain"])
+    assert all(float(r["gatmo_trusted_fraction"]) > 0.2 for r in rows["preset"])
+    want = sim_stack_config()
+    want.amcl.max_particles = 2500
+    for r in rows["preset"]:
+        assert load_stack_config(tmp_path / "preset" / r["folder"] / "config.yaml") == want
+
+
 def test_run_chain_feeds_objects_to_the_next_run(scenario, tmp_path):
     spec = _spec(Path(scenario.out_dir), "run", grid="{}")
     res = run_batch(spec, tmp_path / "out", workers=1)
