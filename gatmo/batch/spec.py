@@ -146,11 +146,13 @@ def expand_jobs(spec_path: str | Path) -> list[list[Job]]:
         params_path = str(q.resolve())
 
     if spec.preset is not None:
-        from gatmo.pipeline.config import STACK_PRESETS
+        from gatmo.pipeline.config import stack_preset
 
-        if spec.preset not in STACK_PRESETS:
-            raise ConfigError(f"unknown preset {spec.preset!r}: {' | '.join(STACK_PRESETS)}",
-                              file=spec_path, line=lines.get(("preset",)), field="preset")
+        try:
+            stack_preset(spec.preset)
+        except ConfigError as exc:  # the same message, with the spec's file and line
+            raise ConfigError(exc.message, file=spec_path, line=lines.get(("preset",)),
+                              field="preset") from None
     map_digest = {name: _map_digest(p) for name, p in maps.items()}
     params_digest = _digest([Path(params_path).read_bytes()]) if params_path else None
 

@@ -41,25 +41,26 @@ def _scenario_summary(path: Path) -> dict:
     from gatmo.datasets.sim import load_scenario
     from gatmo.errors import FormatError
 
+    def dicts(x) -> bool:
+        return isinstance(x, list) and all(isinstance(v, dict) for v in x)
+
     doc = load_scenario(path)
     runs = doc["runs"]
-    if not isinstance(runs, list) or not all(
-            isinstance(r, dict) and isinstance(r.get("changes", []), list)
-            and all(isinstance(c, dict) for c in r.get("changes", []))
-            and isinstance(r.get("people", []), list) for r in runs) or not isinstance(
-            doc["map_objects"], list):
+    ok = (dicts(runs) and isinstance(doc["map_objects"], list)
+          and all(dicts(r.get("changes", [])) and isinstance(r.get("people", []), list)
+                  for r in runs))
+    if not ok:
         raise FormatError("runs must be a list of runs with lists of changes and people, "
                           "map_objects a list", file=path, field="runs")
     changes: dict[str, list[int]] = {}
-    for k, run in enumerate(doc["runs"]):
+    for k, run in enumerate(runs):
         for ch in run.get("changes", []):
-            kinds = changes.setdefault(ch.get("kind", "?"), [0] * len(doc["runs"]))
-            kinds[k] += 1
+            changes.setdefault(ch.get("kind", "?"), [0] * len(runs))[k] += 1
     return {"kind": "scenario", "preset": doc.get("preset"), "seed": doc.get("seed"),
-            "runs": len(doc["runs"]), "map_objects": len(doc["map_objects"]),
-            "scans_per_run": [r.get("scans") for r in doc["runs"]],
+            "runs": len(runs), "map_objects": len(doc["map_objects"]),
+            "scans_per_run": [r.get("scans") for r in runs],
             **{f"{kind}_per_run": n for kind, n in sorted(changes.items())},
-            "people_per_run": [len(r.get("people", [])) for r in doc["runs"]]}
+            "people_per_run": [len(r.get("people", [])) for r in runs]}
 
 
 def _json_summary(path: Path) -> dict:

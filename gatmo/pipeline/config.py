@@ -58,12 +58,13 @@ def load_stack_config(config_path: str | Path | None = None, params_path: str | 
     return cfg
 
 
-def sim_stack_config():
+def sim_stack_config(odom=None):
     """The stack config the demo uses on simulated halls: the likelihood_field_prob model with
     sigma_hit 0.1 m (ROS's default likelihood_field weighs so flatly that the filter trails the
     robot by 0.15 m in a furniture hall), ROS 1's
     laser weights (z_hit 0.95, z_rand 0.05) and odometry noise matched to the simulator's
-    (Thrun's alphas 0.05 / 0.01 / 0.05 / 0.01, ``SimConfig.odom``; until 2026-11-27 alpha2 and
+    (Thrun's alphas of ``odom``, a :class:`gatmo.datasets.sim.config.OdomConfig`, by default
+    ``SimConfig().odom``'s 0.05 / 0.01 / 0.05 / 0.01; until 2026-11-27 alpha2 and
     alpha4 were 0.05, which let the cloud's heading wander about 3x faster per metre than the
     simulated wheels' and a moved piece in view pull it along: docs/history.md, "The filter's
     odometry noise").
@@ -76,9 +77,14 @@ def sim_stack_config():
     was (5.9 % -> 5.6 %; worse on seeds 200-209, 10.2 % -> 13.0 %); see docs/history.md."""
     cfg = StackConfig()
     a = cfg.amcl
+    if odom is None:
+        from gatmo.datasets.sim import SimConfig
+
+        odom = SimConfig().odom
     for k, v in dict(laser_model="likelihood_field_prob", sigma_hit_m=0.1,
-                     z_hit=0.95, z_rand=0.05, alpha1=0.05, alpha2=0.01, alpha3=0.05,
-                     alpha4=0.01, update_min_d_m=0.1, update_min_a_rad=0.1, min_particles=500,
+                     z_hit=0.95, z_rand=0.05, alpha1=odom.alpha1, alpha2=odom.alpha2,
+                     alpha3=odom.alpha3, alpha4=odom.alpha4, update_min_d_m=0.1,
+                     update_min_a_rad=0.1, min_particles=500,
                      max_particles=3000, initial_cov_xx_m2=0.1**2, initial_cov_yy_m2=0.1**2,
                      initial_cov_aa_rad2=math.radians(5.0)**2).items():
         setattr(a, k, v)

@@ -679,8 +679,10 @@ def compare(
         atomic_write_text(
             out / "summary.json", json.dumps(result.as_dict(), indent=2, default=_json_default)
         )
-    return CompareResult(out, rows, _overall(rows), pics, traces,
-                         static_amcl=static_amcl is not None, warnings=untrusted_logs(rows, cfg))
+    if not logs:
+        result = CompareResult(out, rows, _overall(rows), pics, traces,
+                               static_amcl=static_amcl is not None)
+    return result
 
 
 def _run_number(log, default: int) -> int:
@@ -730,11 +732,8 @@ def simulate(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: 
 
     scen = simulate_scenario(out_dir, preset=preset, runs=runs, seed=seed, bag=bag,
                              config=sim_config)
-    stack = sim_stack_config()
-    # the filter assumes the wheels' noise this simulator draws (Thrun's alphas, as AMCL's)
-    odom = (SimConfig.for_preset(preset) if sim_config is None else sim_config).odom
-    for k in ("alpha1", "alpha2", "alpha3", "alpha4"):
-        setattr(stack.amcl, k, getattr(odom, k))
+    stack = sim_stack_config((SimConfig.for_preset(preset) if sim_config is None
+                              else sim_config).odom)
     stack_yaml = scen.out_dir / SCENARIO_STACK_YAML
     atomic_write_text(stack_yaml, dump_model(stack, comments=True))
     return scen, stack_yaml
