@@ -108,7 +108,8 @@ def _progress(description: str):
 def _print_mapping(title: str, rows: dict) -> None:
     from rich.table import Table
 
-    table = Table(title=title, show_header=False)
+    # as wide as its title: a long path as title is not broken mid-name
+    table = Table(title=title, show_header=False, min_width=len(title))
     table.add_column("field", style="bold")
     table.add_column("value")
     for k, v in rows.items():
@@ -211,6 +212,7 @@ def localize(
             progress=update,
         )
     _print_mapping("localization", summary.as_dict())
+    _print_warnings(summary.warnings)
 
 
 # ---------------------------------------------------------------------------- run

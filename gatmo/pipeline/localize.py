@@ -20,9 +20,10 @@ class LocalizeSummary:
     skipped: int
     out_path: str
     errors: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)  # runs.vet_ground_truth
 
     def as_dict(self) -> dict:
-        d = {k: v for k, v in self.__dict__.items() if k != "errors"}
+        d = {k: v for k, v in self.__dict__.items() if k not in ("errors", "warnings")}
         d.update(self.errors)
         return d
 
@@ -58,8 +59,10 @@ def run_localize(
         check_overlap,
         ground_truth_of,
         initial_pose_for,
+        initial_pose_origin,
         load_scans,
         score,
+        vet_ground_truth,
     )
 
     grid = load_map(map_yaml)
@@ -77,7 +80,8 @@ def run_localize(
     loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(seed))
     pose0 = initial_pose_for(scans, initial_pose, global_localization, cfg.initial_pose_xytheta)
     if pose0 is not None:
-        check_overlap(grid, scans[0], pose0, log)
+        check_overlap(grid, scans[0], pose0, log,
+                      initial_pose_origin(initial_pose, cfg.initial_pose_xytheta))
         loc.set_initial_pose(pose0)
     else:
         loc.global_localization()
@@ -101,7 +105,7 @@ def run_localize(
         ms_per_update=st["ms_per_update_median"], ms_per_scan=elapsed * 1e3 / n,
         skipped=st["skipped_no_valid_beams"], out_path=str(out_path),
     )
-    gt = ground_truth_of(scans, log, None)
+    gt, summary.warnings = vet_ground_truth(grid, scans, ground_truth_of(scans, log, None), log)
     if gt is not None:
         from gatmo.pipeline.runs import RunTrace
 

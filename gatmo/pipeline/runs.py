@@ -117,26 +117,88 @@ def ground_truth_of(scans: list, log: str | Path, gt_path: str | Path | None) ->
     return None
 
 
-def check_overlap(grid: OccupancyGrid, scan, pose_xytheta: np.ndarray, log: str | Path) -> float:
-    """Fraction of the first scan's endpoints that land on the map's known area near a wall.
-
-    A log recorded elsewhere puts its returns in unknown space or outside the grid; refuse it
-    instead of reporting a meaningless error figure.
-    """
+def known_fraction(grid: OccupancyGrid, scan, pose_xytheta: np.ndarray) -> float:
+    """Share of ``scan``'s returns, laid at the robot pose ``pose_xytheta`` (map frame), that
+    fall on known cells of ``grid`` (free or occupied, inside it); 1.0 for a scan without
+    returns."""
     from gatmo.geometry import compose, transform_points
 
     pts = transform_points(compose(pose_xytheta, scan.laser_pose_xytheta), scan.points_laser_xy())
     if len(pts) == 0:
         return 1.0
-    vals = grid.value_at(pts)
-    known = np.mean(vals != UNKNOWN)
-    if known < 0.1:
+    return float(np.mean(grid.value_at(pts) != UNKNOWN))
+
+
+#: below this share of returns on known map cells a pose is not in the map's frame (or the log
+#: was recorded elsewhere): a run from it, or a score against it, would be meaningless
+MIN_KNOWN_FRACTION = 0.1
+
+
+def check_overlap(grid: OccupancyGrid, scan, pose_xytheta: np.ndarray, log: str | Path,
+                  origin: str = "the initial pose") -> float:
+    """Fraction of the first scan's endpoints that land on the map's known area.
+
+    A log recorded elsewhere, or a start given in another frame, puts the returns in unknown
+    space or outside the grid; refuse it instead of reporting a meaningless error figure.
+    ``origin`` says where the pose came from, for the message.
+    """
+    known = known_fraction(grid, scan, pose_xytheta)
+    if known < MIN_KNOWN_FRACTION:
+        x, y, th = (float(v) for v in pose_xytheta)
+        hint = ("the log's ground truth may be in another frame than the map's; "
+                if origin == GT_ORIGIN else "")
         raise DataError(
-            f"the log does not overlap the map: {known:.0%} of the first scan's returns at the "
-            f"initial pose fall on known map cells",
+            f"the log does not overlap the map: {known:.0%} of the first scan's returns at "
+            f"{origin} ({x:.2f} m, {y:.2f} m, {np.degrees(th):.1f} deg) fall on known map "
+            f"cells; {hint}give the start in the map frame (--initial-pose X,Y,YAW) or "
+            "localize globally (--global)",
             file=log,
         )
-    return float(known)
+    return known
+
+
+#: :func:`initial_pose_origin` of a start taken from the log's ground truth
+GT_ORIGIN = "the log's first ground-truth pose"
+
+
+def initial_pose_origin(initial_pose, configured=None) -> str:
+    """Where :func:`initial_pose_for` took a (non-None) start from, for messages."""
+    if initial_pose is not None:
+        return "the given initial pose"
+    if configured is not None:
+        return "the configuration's initial pose (amcl.initial_pose_xytheta)"
+    return GT_ORIGIN
+
+
+def vet_ground_truth(grid: OccupancyGrid, scans: list, gt: GroundTruth | None, log: str | Path,
+                     samples: int = 10) -> tuple[GroundTruth | None, list[str]]:
+    """``gt`` checked to be in the map's frame: at up to ``samples`` of its poses spread over
+    the log, the median share of the nearest scan's returns on known map cells must reach
+    :data:`MIN_KNOWN_FRACTION` (most of them, where the poses are right). A ground-truth file
+    that fails is refused (:class:`DataError` naming it); ground truth carried in the log (a
+    simulator's, e.g. Stage's ``base_pose_ground_truth``, often in the simulator's own frame) is
+    dropped with a warning line, so nothing is scored against it. Returns (gt or None,
+    warnings)."""
+    if gt is None or len(gt.stamps_s) == 0:
+        return gt, []
+    stamps = np.array([s.stamp_s for s in scans])
+    pick = np.unique(np.linspace(0, len(gt.stamps_s) - 1, min(samples, len(gt.stamps_s)))
+                     .round().astype(int))
+    fracs = []
+    for i in pick:
+        j = int(np.argmin(np.abs(stamps - gt.stamps_s[i])))
+        if abs(stamps[j] - gt.stamps_s[i]) <= 0.05:
+            fracs.append(known_fraction(grid, scans[j], gt.poses_xytheta[i]))
+    if not fracs or float(np.median(fracs)) >= MIN_KNOWN_FRACTION:
+        return gt, []
+    what = (f"{float(np.median(fracs)):.0%} of the log's returns at its poses fall on known map "
+            "cells (median of "
+            f"{len(fracs)} scans): it is not in the map's frame")
+    if not gt.source.endswith("(in-log)"):
+        raise DataError(f"ground truth: {what}", file=gt.source)
+    return None, [f"{log}: the ground truth in the log is not scored against: {what} (e.g. a "
+                  "simulator's own world frame); score against one in the map frame (gatmo compare "
+                  "--ground-truth)"]
 
 
 # ---------------------------------------------------------------------------- builders
@@ -488,16 +550,17 @@ def run_gatmo(
     pose0 = initial_pose_for(scans, initial_pose, global_localization,
                              cfg.amcl.initial_pose_xytheta)
     if pose0 is not None:
-        check_overlap(base, scans[0], pose0, log)
+        check_overlap(base, scans[0], pose0, log,
+                      initial_pose_origin(initial_pose, cfg.amcl.initial_pose_xytheta))
+    gt, gt_warnings = vet_ground_truth(base, scans, ground_truth_of(scans, log, None), log)
     if run_id is None:
         run_id = mapper.object_map.runs + 1
     trace = run_full(cfg, mapper, scans, cfg.seed, pose0, log=str(log), run_id=run_id,
                      progress=progress, total=len(scans))
     write_trace(trace, out)
     write_object_map(mapper, base, out, _base_meta(Path(map_yaml), base))
-    gt = ground_truth_of(scans, log, None)
     rows = [score(trace, gt)]
-    return RunSummary(rows, out, untrusted_logs(rows, cfg))
+    return RunSummary(rows, out, gt_warnings + untrusted_logs(rows, cfg))
 
 
 # ------------------------------------------------------------------------------ compare
@@ -624,14 +687,18 @@ def compare(
     rows: list = []
     pics: list = []
     traces: dict = {}
+    gt_warnings: list[str] = []
     done = 0
     for k, log in enumerate(logs):
         scans = load_scans(log, fmt, max_scans)
-        gt = ground_truth_of(scans, log, gt_paths[k] if gt_paths else None)
         pose0 = initial_pose_for(scans, initial_pose, global_localization,
                                  cfg.amcl.initial_pose_xytheta)
         if pose0 is not None:
-            check_overlap(base, scans[0], pose0, log)
+            check_overlap(base, scans[0], pose0, log,
+                          initial_pose_origin(initial_pose, cfg.amcl.initial_pose_xytheta))
+        gt, warned = vet_ground_truth(
+            base, scans, ground_truth_of(scans, log, gt_paths[k] if gt_paths else None), log)
+        gt_warnings += warned
         seed = cfg.seed + k
         name = f"{k + 1:02d}_{Path(log).stem.split('.')[0]}"
         total = 2 * len(scans)
@@ -675,7 +742,7 @@ def compare(
             traces[(k, "gatmo")] = t_gatmo
         result = CompareResult(out, rows, _overall(rows), pics, traces,
                                static_amcl=static_amcl is not None,
-                               warnings=untrusted_logs(rows, cfg))
+                               warnings=gt_warnings + untrusted_logs(rows, cfg))
         atomic_write_text(
             out / "summary.json", json.dumps(result.as_dict(), indent=2, default=_json_default)
         )

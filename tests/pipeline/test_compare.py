@@ -112,6 +112,78 @@ def test_log_that_does_not_overlap_the_map_is_refused(scen, tmp_path, capsys):
     assert "does not overlap the map" in err or "outside the map" in err
 
 
+def _shifted_map(scen, tmp_path, dx_m: float):
+    """The scenario's map with its origin moved by ``dx_m`` along x: the same walls, in a frame
+    the log's own ground truth is not in (as Stage's is not in a map_server map's)."""
+    import shutil
+
+    import yaml
+
+    meta = yaml.safe_load(scen.map_yaml.read_text())
+    meta["origin"][0] += dx_m
+    shutil.copy(scen.map_yaml.parent / meta["image"], tmp_path / meta["image"])
+    out = tmp_path / "shifted.yaml"
+    out.write_text(yaml.safe_dump(meta))
+    return out
+
+
+def test_ground_truth_in_another_frame_is_not_scored_against(scen, tmp_path, capsys):
+    from gatmo.datasets.tum import read_tum, write_tum
+
+    shifted = _shifted_map(scen, tmp_path, 50.0)
+    log = str(scen.logs[0])
+    # the start taken from the log's ground truth lands off the map: say where it came from
+    assert main(["localize", "--map", str(shifted), "--log", log, "--out",
+                 str(tmp_path / "p.tum")]) == 1
+    err = capsys.readouterr().err
+    assert "the log's first ground-truth pose (3.50 m, 7.00 m, -90.0 deg)" in err
+    assert "another frame" in err and "--initial-pose" in err and "--global" in err
+    # the given start in the map's frame runs; the log's ground truth is not scored against
+    t, gt = read_tum(scen.gt[0])
+    start = f"{gt[0, 0] + 50.0},{gt[0, 1]},{gt[0, 2]}"
+    assert main(["localize", "--map", str(shifted), "--log", log, "--initial-pose", start,
+                 "--out", str(tmp_path / "p.tum")]) == 0
+    out = capsys.readouterr().out
+    assert "warning:" in out and "not in the map's frame" in out and "ate_rmse_m" not in out
+    p_t, p = read_tum(tmp_path / "p.tum")  # AMCL's defaults in a rearranged hall: tenths
+    assert np.median(np.hypot(p[:, 0] - 50.0 - gt[:, 0], p[:, 1] - gt[:, 1])) < 0.5
+    # a ground-truth file in the other frame is refused, naming it; one in the map's is scored
+    cmp = ["compare", log, "--map", str(shifted), "--initial-pose", start]
+    assert main([*cmp, "--ground-truth", str(scen.gt[0]), "--out", str(tmp_path / "a")]) == 1
+    err = capsys.readouterr().err
+    assert scen.gt[0].name in err and "not in the map's frame" in err
+    moved = tmp_path / "gt_map.tum"
+    write_tum(moved, t, gt + [50.0, 0.0, 0.0])
+    assert main([*cmp, "--ground-truth", str(moved), "--out", str(tmp_path / "b")]) == 0
+    s = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert not any("frame" in w for w in s["warnings"])
+    assert all(r["ate_median_m"] < 0.5 for r in s["logs"])
+    # without a file the in-log ground truth is dropped with a warning in summary.json
+    assert main([*cmp, "--out", str(tmp_path / "c")]) == 0
+    s = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert any("not in the map's frame" in w for w in s["warnings"])
+    assert all("ate_rmse_m" not in r for r in s["logs"])
+
+
+def test_vet_ground_truth_keeps_ground_truth_that_puts_the_scans_on_the_map():
+    from gatmo.errors import DataError
+    from gatmo.pipeline.runs import GroundTruth, vet_ground_truth
+    from tests.helpers import make_scan, room_grid
+
+    grid = room_grid(10.0, 8.0, boxes=[(3.0, 3.0, 4.0, 4.0)])
+    poses = np.array([[2.0 + 0.1 * i, 2.0, 0.3] for i in range(20)])
+    scans = [make_scan(grid, p, max_range_m=4.0, stamp_s=0.1 * i) for i, p in enumerate(poses)]
+    stamps = np.array([s.stamp_s for s in scans])
+    right = GroundTruth(stamps, poses, "log (in-log)")
+    assert vet_ground_truth(grid, scans, right, "log") == (right, [])
+    assert vet_ground_truth(grid, scans, None, "log") == (None, [])
+    off = poses + [0.0, 30.0, 0.0]
+    gt, warned = vet_ground_truth(grid, scans, GroundTruth(stamps, off, "log (in-log)"), "log")
+    assert gt is None and len(warned) == 1 and warned[0].startswith("log: ")
+    with pytest.raises(DataError, match="gt.tum.*not in the map's frame"):
+        vet_ground_truth(grid, scans, GroundTruth(stamps, off, "gt.tum"), "log")
+
+
 def test_simulate_writes_the_matched_stack_config_and_compare_warns_without_it(tmp_path,
                                                                               capsys):
     # a user's path: gatmo simulate, then gatmo compare on what it wrote. AMCL's defaults

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from gatmo.cli import main
 from gatmo.datasets.sim import SimConfig, simulate_scenario
@@ -67,3 +70,30 @@ def test_localize_takes_the_amcl_section_of_a_stack_config(tmp_path):
     assert np.array_equal(poses["c"], poses["a"]) and np.array_equal(poses["c"], poses["s"])
     assert not np.array_equal(poses["c"], poses["d"])  # AMCL's defaults: another filter
     assert np.array_equal(poses["p"], poses["d"])  # the AMCL file alone, as without --config
+
+
+UOB = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "uob-meeting"
+
+
+@pytest.mark.skipif(not (UOB / "simpath2.bag").exists(),
+                    reason="../shared/data/uob-meeting (the Stage run) not found")
+def test_real_stage_log_whose_ground_truth_is_in_stage_s_frame(tmp_path, capsys):
+    # The Stage bag carries /base_pose_ground_truth in Stage's world frame, which is not the
+    # map_server map's: map = 0.96462 x stage + (15.08, 15.26) (../shared/data/README.md).
+    # Taken as the start it lands off the map, and scored against it would give 21 m of error.
+    from gatmo.datasets.rosbag import RosBag
+
+    args = ["localize", "--map", str(UOB / "meeting.yaml"), "--log", str(UOB / "simpath2.bag")]
+    assert main([*args, "--out", str(tmp_path / "a.tum")]) == 1
+    err = capsys.readouterr().err
+    assert "the log's first ground-truth pose (12.99 m, -2.65 m, 46.8 deg)" in err
+    assert "another frame" in err
+    gt = np.array([s.gt_pose_xytheta for s in RosBag(UOB / "simpath2.bag")])
+    gt_map = gt[:, :2] * 0.96462 + [15.08, 15.26]
+    start = f"{gt_map[0, 0]},{gt_map[0, 1]},{gt[0, 2]}"
+    assert main([*args, "--initial-pose", start, "--out", str(tmp_path / "b.tum")]) == 0
+    out = capsys.readouterr().out
+    assert "not in the map's frame" in out and "ate_rmse_m" not in out
+    _, p = read_tum(tmp_path / "b.tum")
+    err_m = np.hypot(*(p[:, :2] - gt_map).T)
+    assert np.median(err_m) < 0.15 and err_m.max() < 0.6  # measured 0.081 and 0.49 m
