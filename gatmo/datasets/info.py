@@ -100,9 +100,9 @@ def _yaml_summary(path: Path) -> dict:
                     "alphas": [a.alpha1, a.alpha2, a.alpha3, a.alpha4],
                     "particles": [a.min_particles, a.max_particles],
                     "update_min_d_m / _a_rad": [a.update_min_d_m, a.update_min_a_rad]}
-    from gatmo.maps.io import load_map
+    from gatmo.datasets.open import open_map
 
-    return _grid_summary(load_map(path))
+    return _grid_summary(open_map(path))
 
 
 def summarize(path: str | Path, fmt: str | None = None) -> dict:
@@ -114,7 +114,9 @@ def summarize(path: str | Path, fmt: str | None = None) -> dict:
         return _json_summary(p)
     if name.endswith((".yaml", ".yml")):
         return _yaml_summary(p)
-    if name.startswith("wean.dat"):
+    from gatmo.datasets.open import is_wean_map
+
+    if is_wean_map(p):
         from gatmo.datasets.wean import load_wean_map
 
         return _grid_summary(load_wean_map(p))

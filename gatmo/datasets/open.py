@@ -57,3 +57,30 @@ def open_log(path: str | Path, fmt: str | None = None, **kw):
 
         return WeanLog(path, **kw)
     raise FormatError(f"unknown format {fmt!r}: {' | '.join(FORMATS)}", field="--format")
+
+
+def is_wean_map(path: str | Path) -> bool:
+    """Whether ``path`` is a CMU Wean Hall / Beeson-format map (``robot_specifications->...``
+    header, plain or gzip'd), not a map_server YAML."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            head = f.read(2)
+        opener = gzip.open if head == b"\x1f\x8b" else open
+        with opener(p, "rt", errors="replace") as fh:
+            return fh.read(64).lstrip().startswith("robot_specifications")
+    except (OSError, EOFError, gzip.BadGzipFile):
+        return False  # load_map reports what is wrong with it
+
+
+def open_map(path: str | Path, **kw):
+    """An OccupancyGrid from a map_server map (YAML + image) or a CMU Wean Hall map
+    (``wean.dat``, ``.gz`` or not), told apart by content; ``kw`` go to
+    :func:`gatmo.maps.io.load_map`."""
+    if is_wean_map(path):
+        from gatmo.datasets.wean import load_wean_map
+
+        return load_wean_map(path)
+    from gatmo.maps.io import load_map
+
+    return load_map(path, **kw)

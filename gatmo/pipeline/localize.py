@@ -50,11 +50,11 @@ def run_localize(
     ``params_path``, else the ``amcl`` section of the gatmo stack YAML ``config_path`` (what
     ``gatmo run --config`` takes, e.g. a simulated scenario's ``stack.yaml``) or of the named
     stack configuration ``preset``, else AMCL's defaults."""
+    from gatmo.datasets.open import open_map
     from gatmo.datasets.tum import write_tum
     from gatmo.localization.config import AmclConfig
     from gatmo.localization.mcl import MonteCarloLocalizer
     from gatmo.localization.params import load_amcl_yaml
-    from gatmo.maps.io import load_map
     from gatmo.pipeline.runs import (
         check_overlap,
         ground_truth_of,
@@ -65,7 +65,7 @@ def run_localize(
         vet_ground_truth,
     )
 
-    grid = load_map(map_yaml)
+    grid = open_map(map_yaml)
     if config is not None:
         cfg = config
     elif params_path is not None:

@@ -537,14 +537,14 @@ def run_gatmo(
     ``run_id``: the run's number in the object map's history and events; None: the one after
     the last run laid on ``objects_path`` (1 on a fresh map). ``preset``: a named stack
     configuration (:data:`gatmo.pipeline.config.STACK_PRESETS`) instead of ``config_path``."""
-    from gatmo.maps.io import load_map
+    from gatmo.datasets.open import open_map
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cfg = load_stack_config(config_path, params_path, preset)
     atomic_write_text(out / "config.yaml", dump_stack_config(cfg))
-    base = load_map(map_yaml)
+    base = open_map(map_yaml)
     mapper = _make_mapper(cfg, base, Path(objects_path) if objects_path else None)
     scans = load_scans(log, fmt, max_scans)
     pose0 = initial_pose_for(scans, initial_pose, global_localization,
@@ -645,7 +645,7 @@ def compare(
     ``out_dir/static_amcl.yaml`` and named in ``summary.json``.
     ``observer``: a live view (:class:`gatmo.pipeline.live.RerunObserver`) or None.
     ``preset``: a named stack configuration instead of ``config_path``."""
-    from gatmo.maps.io import load_map
+    from gatmo.datasets.open import open_map
     from gatmo.pipeline.config import dump_stack_config, load_stack_config
 
     out = Path(out_dir)
@@ -666,7 +666,7 @@ def compare(
 
         static_cfg = cfg.model_copy(update={"amcl": static_amcl})
         atomic_write_text(out / "static_amcl.yaml", dump_model(static_amcl))
-    base = load_map(map_yaml)
+    base = open_map(map_yaml)
     meta = _base_meta(Path(map_yaml), base)
     relations = None
     if relations_path is not None:

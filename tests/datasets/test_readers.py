@@ -251,3 +251,40 @@ def test_info_tells_a_scenario_a_stack_config_and_ros_amcl_files_from_maps(tmp_p
     (tmp_path / "junk.yaml").write_text("foo: 1\n")
     with pytest.raises(FormatError, match="image"):  # nothing it knows: the map's error
         summarize(tmp_path / "junk.yaml")
+
+
+def test_open_map_reads_a_wean_format_map_by_content_and_commands_take_it(tmp_path):
+    # `--map` takes a CMU Wean Hall map (the 16-833 course's format) as it takes a map_server
+    # YAML; told apart by its header, whatever the file is called
+    from gatmo.datasets.open import is_wean_map, open_map
+    from gatmo.maps.io import save_map
+    from tests.helpers import make_scan, room_grid
+
+    room = room_grid(4.0, 3.0, resolution_m=0.1)  # cells[iy, ix]
+    p_free = np.where(room.occupied, 0.0, 1.0)  # the file holds P(free), rows are x
+    rows = "\n".join(" ".join(f"{v:.3f}" for v in col) for col in p_free.T)
+    text = ("robot_specifications->global_mapsize_x 400\nrobot_specifications->"
+            "global_mapsize_y 300\nrobot_specifications->resolution 10\n\n"
+            f"global_map[0]: {room.width} {room.height}\n{rows}\n")
+    wean = tmp_path / "lab.dat.gz"
+    wean.write_bytes(gzip.compress(text.encode()))
+    assert is_wean_map(wean) and not is_wean_map(tmp_path / "missing.dat")
+    g = open_map(wean)
+    np.testing.assert_array_equal(g.occupied, room.occupied)
+    assert g.resolution_m == pytest.approx(0.1)
+    info = summarize(wean)  # `gatmo info`
+    assert info["kind"] == "map" and info["size_cells"] == f"{room.width} x {room.height}"
+    save_map(room, tmp_path / "m.yaml")
+    assert not is_wean_map(tmp_path / "m.yaml")
+    np.testing.assert_array_equal(open_map(tmp_path / "m.yaml").occupied, room.occupied)
+    # and `gatmo localize --map lab.dat.gz` runs on it
+    from gatmo.pipeline.localize import run_localize
+
+    scans = [make_scan(room, [1.0 + 0.05 * i, 1.5, 0.0], max_range_m=4.0, stamp_s=0.1 * i)
+             for i in range(10)]
+    from gatmo.datasets.carmen import write_carmen
+
+    write_carmen(tmp_path / "lab.clf", scans)
+    s = run_localize(wean, tmp_path / "lab.clf", out_path=tmp_path / "p.tum",
+                     initial_pose=[1.0, 1.5, 0.0])
+    assert s.scans == 10 and s.errors["ate_median_m"] < 0.1
