@@ -507,6 +507,34 @@ def map_build(
     _print_mapping("map build", summary.as_dict())
 
 
+# --------------------------------------------------------------------------- eval
+@app.command("eval")
+def eval_trajectory(
+    poses: Annotated[Path, typer.Argument(help="Estimated trajectory (TUM).")],
+    ground_truth: Annotated[
+        Path | None, typer.Option("--ground-truth", help="Ground-truth trajectory (TUM).")
+    ] = None,
+    relations: Annotated[
+        Path | None, typer.Option("--relations", help="Relations file (t1 t2 x y z r p y).")
+    ] = None,
+    align: Annotated[bool, typer.Option(
+        "--align", help="Fit the estimate rigidly onto the ground truth first (a trajectory "
+        "in a frame of its own, e.g. from map build).")] = False,
+    correct_scale: Annotated[bool, typer.Option(
+        "--correct-scale", help="Fit a scale too (implies --align).")] = False,
+    stamp_offset: Annotated[float, typer.Option(
+        "--stamp-offset", help="Seconds added to the estimate's stamps.")] = 0.0,
+) -> None:
+    """Score a trajectory: position error against ground truth (no alignment unless --align)
+    and/or the relations error of the SLAM benchmark (Kümmerle et al. 2009)."""
+    from gatmo.pipeline.trajectory import evaluate_trajectory
+
+    res = evaluate_trajectory(poses, gt_path=ground_truth, relations_path=relations,
+                              align=align, correct_scale=correct_scale,
+                              stamp_offset_s=stamp_offset)
+    _print_mapping(f"eval {poses.name}", res)
+
+
 # ---------------------------------------------------------------------- entry point
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: run the app, turning GatmoError into one red line and exit code 1."""

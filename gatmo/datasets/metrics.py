@@ -5,7 +5,35 @@ from __future__ import annotations
 
 import numpy as np
 
-from gatmo.geometry import interpolate_poses, nearest_index, points_to_beams, relative, wrap_angle
+from gatmo.geometry import (
+    compose,
+    interpolate_poses,
+    nearest_index,
+    points_to_beams,
+    relative,
+    wrap_angle,
+)
+
+
+def align_se2(src_xy: np.ndarray, dst_xy: np.ndarray, *, with_scale: bool = False):
+    """The rigid 2D transform (x, y, theta), and with ``with_scale`` the scale too, that best
+    maps the points ``src_xy`` (N, 2) onto ``dst_xy`` (N, 2) in the least-squares sense
+    (Umeyama 1991, as evo's ``--align`` / ``--correct_scale``): dst ~ scale R(theta) src +
+    (x, y). Returns (T (3,), scale); scale is 1.0 without ``with_scale``. Needs N >= 2
+    distinct points for a rotation."""
+    src = np.asarray(src_xy, dtype=float)
+    dst = np.asarray(dst_xy, dtype=float)
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    h = (src - ms).T @ (dst - md)  # cross-covariance, (2, 2)
+    # the angle maximising trace(R h): atan2 of its antisymmetric over its symmetric part
+    theta = np.arctan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+    c, s = np.cos(theta), np.sin(theta)
+    scale = 1.0
+    if with_scale:
+        var = float(np.sum((src - ms) ** 2))
+        scale = float((c * (h[0, 0] + h[1, 1]) + s * (h[0, 1] - h[1, 0])) / var) if var else 1.0
+    t = md - scale * (np.array([[c, -s], [s, c]]) @ ms)
+    return np.array([t[0], t[1], theta]), scale
 
 
 def ate(
@@ -16,11 +44,17 @@ def ate(
     *,
     max_dt_s: float = 0.05,
     lost_m: float = 0.5,
+    align: bool = False,
+    with_scale: bool = False,
 ) -> dict:
-    """Position error without alignment (the map frame is fixed).
+    """Position error, without alignment by default (the map frame is fixed).
 
     Ground truth is interpolated at the estimate's stamps; estimates outside the ground truth's
-    time span (by more than ``max_dt_s``) are not scored. Returns rmse_m, median_m, max_m,
+    time span (by more than ``max_dt_s``) are not scored. With ``align`` the estimate is first
+    moved by the rigid transform that fits its positions best onto the ground truth's
+    (:func:`align_se2`; for a trajectory in a frame of its own, such as a map built from the
+    log), returned as ``T_gt_est`` (x, y, theta); ``with_scale`` fits a scale too (returned
+    as ``scale``: a map or a ground truth at another scale). Returns rmse_m, median_m, max_m,
     mean_rot_deg, lost_fraction (error > ``lost_m``) and n.
     """
     t = np.asarray(stamps_s, dtype=float)
@@ -32,6 +66,13 @@ def ate(
         return dict(rmse_m=nan, median_m=nan, max_m=nan, mean_rot_deg=nan, lost_fraction=nan,
                     n=0)
     g = interpolate_poses(gt_t, gt_xytheta, t[ok])
+    extra = {}
+    if align:
+        T, scale = align_se2(est[ok, :2], g[:, :2], with_scale=with_scale)
+        est = est.copy()
+        est[ok] = compose(T, est[ok] * [scale, scale, 1.0])
+        extra["T_gt_est"] = [float(v) for v in T]
+        extra["scale"] = scale
     e = np.hypot(*(est[ok, :2] - g[:, :2]).T)
     r = np.abs(wrap_angle(est[ok, 2] - g[:, 2]))
     return dict(
@@ -41,6 +82,7 @@ def ate(
         mean_rot_deg=float(np.degrees(np.mean(r))),
         lost_fraction=float(np.mean(e > lost_m)),
         n=int(ok.sum()),
+        **extra,
     )
 
 
