@@ -26,7 +26,7 @@ bench: $(STAMP)
 FUZZ_SECONDS ?= 60
 fuzz: $(STAMP)
 	$(BIN)/pip install -q -e '.[fuzz]'
-	for t in carmen wean tum map amcl objects rosbag; do \
+	for t in carmen wean tum map amcl objects rosbag sniff; do \
 		$(BIN)/python fuzz/fuzz_readers.py $$t -max_total_time=$(FUZZ_SECONDS) || exit 1; \
 	done
 

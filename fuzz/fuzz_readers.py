@@ -1,7 +1,7 @@
 """atheris fuzzing of gatmo's readers: every input must give a result or a GatmoError.
 
     python fuzz/fuzz_readers.py TARGET -max_total_time=60   # TARGET: carmen | tum | map | amcl
-                                                            # | objects | wean | rosbag
+                                                            # | objects | wean | rosbag | sniff
 ``make fuzz`` runs each target for a bounded time. Crashes are saved by libFuzzer as
 crash-* files in the working folder.
 
@@ -30,6 +30,8 @@ with atheris.instrument_imports(include=["gatmo", "rosbags"] if BAG else ["gatmo
 
         from gatmo.datasets.rosbag import RosBag, write_ros1_bag, write_ros2_bag
     from gatmo.datasets.carmen import CarmenLog
+    from gatmo.datasets.info import summarize
+    from gatmo.datasets.open import open_log, open_map
     from gatmo.datasets.tum import read_tum
     from gatmo.datasets.wean import WeanLog
     from gatmo.errors import GatmoError
@@ -44,6 +46,17 @@ TMP = Path(tempfile.mkdtemp(prefix="gatmo-fuzz-"))
 def _carmen(p):
     list(CarmenLog(p, skip_bad=True))
     list(CarmenLog(p))
+
+
+def _sniffed(p):
+    """What `gatmo info`, `--log` and `--map` do with a file of unknown kind (format told by
+    content: CARMEN, Wean, a Wean map, gzip'd or not)."""
+    for fn in (lambda: list(open_log(p)), lambda: open_map(p, max_cells=10_000_000),
+               lambda: summarize(p)):
+        try:
+            fn()
+        except GatmoError:
+            pass
 
 
 def _bag_seeds() -> Path:
@@ -95,6 +108,7 @@ TARGETS = {
     "carmen": ("x.log", _carmen),
     "wean": ("x.log", lambda p: list(WeanLog(p))),
     "tum": ("x.tum", read_tum),
+    "sniff": ("x.gz", _sniffed),
     "map": ("m.yaml", lambda p: load_map(p, max_cells=10_000_000)),
     "amcl": ("a.yaml", load_amcl_yaml),
     "objects": ("o.json", load_objects),

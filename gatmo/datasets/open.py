@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import gzip
 from pathlib import Path
 
+from gatmo.datasets._text import iter_lines
 from gatmo.errors import FormatError
 
 FORMATS = ("carmen", "rosbag", "wean")
@@ -21,23 +21,17 @@ def sniff_format(path: str | Path) -> str:
         raise FormatError("a folder without metadata.yaml: not a ROS 2 bag", file=p)
     if p.suffix in (".bag", ".db3", ".mcap"):
         return "rosbag"
-    try:
-        with open(p, "rb") as f:
-            head = f.read(2)
-        opener = gzip.open if head == b"\x1f\x8b" else open
-        with opener(p, "rt", errors="replace") as fh:
-            for _, line in zip(range(200), fh, strict=False):
-                parts = line.split()
-                if not parts or parts[0].startswith("#"):
-                    continue
-                if parts[0] == "L" and len(parts) == 188:
-                    return "wean"
-                if parts[0] == "O" and len(parts) == 5:
-                    return "wean"
-                if parts[0].isupper() and parts[0].isalnum():
-                    return "carmen"
-    except (OSError, EOFError, gzip.BadGzipFile) as exc:
-        raise FormatError(f"cannot read: {exc}", file=p) from None
+    # iter_lines turns a corrupt gzip stream into a FormatError naming the file
+    for _, (_, line) in zip(range(200), iter_lines(p), strict=False):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        if parts[0] == "L" and len(parts) == 188:
+            return "wean"
+        if parts[0] == "O" and len(parts) == 5:
+            return "wean"
+        if parts[0].isupper() and parts[0].isalnum():
+            return "carmen"
     raise FormatError(f"unknown log format; use --format {' | '.join(FORMATS)}", file=p)
 
 
@@ -62,15 +56,18 @@ def open_log(path: str | Path, fmt: str | None = None, **kw):
 def is_wean_map(path: str | Path) -> bool:
     """Whether ``path`` is a CMU Wean Hall / Beeson-format map (``robot_specifications->...``
     header, plain or gzip'd), not a map_server YAML."""
-    p = Path(path)
+    import gzip
+    import zlib
+
     try:
-        with open(p, "rb") as f:
+        with open(path, "rb") as f:
             head = f.read(2)
         opener = gzip.open if head == b"\x1f\x8b" else open
-        with opener(p, "rt", errors="replace") as fh:
+        with opener(path, "rt", errors="replace") as fh:
+            # 64 characters: a header, or a binary file that is not one (never read whole)
             return fh.read(64).lstrip().startswith("robot_specifications")
-    except (OSError, EOFError, gzip.BadGzipFile):
-        return False  # load_map reports what is wrong with it
+    except (OSError, EOFError, zlib.error):
+        return False  # unreadable: load_map reports what is wrong with it
 
 
 def open_map(path: str | Path, **kw):
