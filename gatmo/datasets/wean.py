@@ -88,25 +88,42 @@ def load_wean_map(path: str | Path) -> OccupancyGrid:
     res_cm = 10.0
     size = None
     rows = []
-    with _open(path) as fh:
-        for lineno, line in enumerate(fh, start=1):
-            s = line.strip()
-            if not s:
-                continue
-            if s.startswith("robot_specifications->resolution"):
-                res_cm = float(s.split()[-1])
-                continue
-            if s.startswith("robot_specifications"):
-                continue
-            if s.startswith("global_map[0]"):
-                w, h = (int(x) for x in s.split(":")[1].split())
-                size = (w, h)
-                continue
+    # iter_lines: a cut or corrupt gzip stream is a FormatError with the file, not a zlib error
+    for lineno, line in iter_lines(path):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("robot_specifications->resolution"):
             try:
-                rows.append(np.array(s.split(), dtype=float))
+                res_cm = float(s.split()[-1])
             except ValueError:
-                raise FormatError("non-numeric map value", file=path, line=lineno) from None
-    if size is None or len(rows) != size[0]:
+                res_cm = float("nan")
+            if not (np.isfinite(res_cm) and res_cm > 0):
+                raise FormatError("the resolution must be a positive number of cm",
+                                  file=path, line=lineno, field="resolution")
+            continue
+        if s.startswith("robot_specifications"):
+            continue
+        if s.startswith("global_map[0]"):
+            try:
+                w, h = (int(x) for x in s.split(":")[1].split())
+            except (ValueError, IndexError):
+                raise FormatError("expected 'global_map[0]: WIDTH HEIGHT'", file=path,
+                                  line=lineno) from None
+            size = (w, h)
+            continue
+        if size is None:
+            raise FormatError("map values before the 'global_map[0]: WIDTH HEIGHT' header",
+                              file=path, line=lineno)
+        try:
+            row = np.array(s.split(), dtype=float)
+        except ValueError:
+            raise FormatError("non-numeric map value", file=path, line=lineno) from None
+        if len(row) != size[1]:
+            raise FormatError(f"expected {size[1]} values in a row, found {len(row)}",
+                              file=path, line=lineno)
+        rows.append(row)
+    if size is None or len(rows) != size[0] or size[1] < 1:
         raise FormatError(f"expected a global_map header and {size} rows, found {len(rows)}",
                           file=path)
     p = np.vstack(rows)  # p[x, y]

@@ -68,6 +68,26 @@ def test_gzip_streams_as_log_map_or_info(tmp_path, data, whole, text):
     _only_gatmo_errors(lambda: summarize(p))
 
 
+WEAN_MAP_TOKENS = st.sampled_from(["robot_specifications->resolution", "robot_specifications->x",
+                                   "global_map[0]:", "2", "3", "0", "-1", "0.5", "1.000", "x",
+                                   "nan", "inf", "-5", "1e309", ":", ""])
+WEAN_MAP = st.lists(st.lists(WEAN_MAP_TOKENS, max_size=5).map(" ".join), max_size=8).map(
+    lambda lines: "robot_specifications->global_mapsize_x 30\n" + "\n".join(lines))
+
+
+@SETTINGS
+@given(text=WEAN_MAP, gz=st.booleans())
+def test_wean_map(tmp_path, text, gz):
+    # a CMU Wean Hall map (`--map wean.dat.gz`): its header, sizes and values drawn broken
+    import gzip
+
+    from gatmo.datasets.open import open_map
+
+    p = tmp_path / "wean.dat"
+    p.write_bytes(gzip.compress(text.encode()) if gz else text.encode())
+    _only_gatmo_errors(lambda: open_map(p))
+
+
 @SETTINGS
 @given(text=LINES)
 def test_wean_tum_relations(tmp_path, text):
