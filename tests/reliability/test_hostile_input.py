@@ -178,3 +178,36 @@ def test_info_on_any_yaml_and_scenario_json(tmp_path, fields, runs):
     doc = {"format": "gatmo-scenario", "runs": runs, "map_objects": runs}
     (tmp_path / "s.json").write_text(json.dumps(doc))
     _only_gatmo_errors(lambda: summarize(tmp_path / "s.json"))
+
+
+BATCH_WORDS = st.sampled_from(["run", "compare", "echo", "localize", "hall", "*.clf",
+                               "amcl.alpha1", "gatmo.x", "sim", ""])
+BATCH_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers(-3, 5) | st.floats(allow_nan=True) | BATCH_WORDS,
+    lambda c: st.lists(c, max_size=3) | st.dictionaries(
+        st.sampled_from(["map", "glob", "site", "hall", "amcl.alpha1", "seed", "x"]), c,
+        max_size=3),
+    max_leaves=12)
+
+
+@SETTINGS
+@given(fields=st.dictionaries(st.sampled_from(["maps", "logs", "command", "params", "preset",
+                                               "grid", "seeds", "max_scans", "extra"]),
+                              BATCH_VALUES, max_size=8))
+def test_batch_spec(tmp_path, fields):
+    # `gatmo batch SPEC.yaml`: any spec is expanded into jobs or refused with a GatmoError.
+    # Drawn as a valid spec with some fields replaced, so the grid, seeds and preset are reached
+    import yaml
+
+    from gatmo.batch.spec import expand_jobs
+    from gatmo.maps.io import save_map
+    from tests.helpers import room_grid
+
+    (tmp_path / "run_1.clf").write_text("ODOM 0 0 0 0 0 0 1.0 h 1.0\n")
+    save_map(room_grid(2.0, 2.0), tmp_path / "m.yaml")
+    spec = {"maps": {"hall": "m.yaml"}, "logs": [{"map": "hall", "glob": "*.clf"}],
+            "command": "echo", "grid": {"amcl.alpha1": [0.1, 0.2]}}
+    spec.update(fields)
+    p = tmp_path / "spec.yaml"
+    p.write_text(yaml.safe_dump(spec))
+    _only_gatmo_errors(lambda: expand_jobs(p))
