@@ -470,3 +470,28 @@ def test_run_and_compare_start_from_the_amcl_files_initial_pose(scen, tmp_path):
                 for side in ("static", "gatmo"))]
     for xy in firsts:
         assert np.hypot(*(xy - start[:2])) < 0.2 < np.hypot(*(xy - truth[:2]))
+
+
+@pytest.mark.skipif(not (DATA / "uob-meeting" / "simpath2.bag").exists(),
+                    reason="../shared/data/uob-meeting (the Stage run) not found")
+def test_real_stage_meeting_room_full_stack_not_worse_than_the_static_localizer(tmp_path):
+    # The map in Stage's frame (map = 0.96462 x stage + (15.08, 15.26), ../shared/data/README):
+    # resolution and origin rescaled, so the bag's own ground truth scores both sides. Nothing
+    # moved in this room: the full stack on the real preset must not be worse (README, "Real
+    # logs": 0.0715 static, 0.0719 full stack)
+    import shutil
+
+    s, t = 0.96462, np.array([15.08, 15.26])
+    shutil.copy(DATA / "uob-meeting" / "meeting.pgm", tmp_path / "meeting.pgm")
+    (tmp_path / "stage.yaml").write_text(
+        f"image: meeting.pgm\nresolution: {0.05 / s:.10f}\norigin: [{-t[0] / s:.10f}, "
+        f"{-t[1] / s:.10f}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    from gatmo.pipeline.runs import compare
+
+    res = compare(tmp_path / "stage.yaml", [DATA / "uob-meeting" / "simpath2.bag"],
+                  tmp_path / "c", preset="real", pictures=False)
+    assert res.warnings == []
+    static, full = (next(r for r in res.rows if r["side"] == side) for side in ("static", "gatmo"))
+    assert static["ate_rmse_m"] < 0.1 and full["ate_rmse_m"] <= 1.05 * static["ate_rmse_m"]
+    assert full["gatmo_trusted_fraction"] > 0.3  # GATMO had the scans, and changed nothing
+    assert full["absent"] == full["relocated"] == full["added"] == 0
