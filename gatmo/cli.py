@@ -161,12 +161,16 @@ def simulate(
     ] = 4,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 3,
     bag: Annotated[bool, typer.Option("--bag", help="Also write a ROS 2 bag per run.")] = False,
+    bag_storage: Annotated[str, typer.Option(
+        "--bag-storage", help="The ROS 2 bags' storage: sqlite3 | mcap (Jazzy's default).")
+    ] = "sqlite3",
 ) -> None:
     """Simulate a rearranged-room scenario: map, logs, ground truth, scenario.json and
     stack.yaml (the stack configuration matched to the simulated robot)."""
     from gatmo.pipeline.runs import simulate as run_simulate
 
-    result, stack_yaml = run_simulate(out, preset=preset, runs=runs, seed=seed, bag=bag)
+    result, stack_yaml = run_simulate(out, preset=preset, runs=runs, seed=seed, bag=bag,
+                                      bag_storage=bag_storage)
     _print_mapping(f"scenario {preset} seed {seed} -> {out}", result.summary())
     logs = " ".join(str(p) for p in result.logs)
     gts = " ".join(f"--ground-truth {p}" for p in result.gt)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from gatmo.datasets.types import ReadStats, Scan, sensor_info
-from gatmo.errors import DataError, FormatError, GatmoError
+from gatmo.errors import ConfigError, DataError, FormatError, GatmoError
 from gatmo.geometry import compose, interpolate_poses
 
 SCAN = "sensor_msgs/msg/LaserScan"
@@ -353,18 +353,26 @@ def _write_bag(writer, ts, scans: list[Scan], *, ros1: bool, scan_topic, odom_to
                                                     "base_link"), ODOM))
 
 
+#: ROS 2 bag storage formats :func:`write_ros2_bag` writes (mcap: ROS 2 Jazzy's default)
+ROS2_STORAGES = ("sqlite3", "mcap")
+
+
 def write_ros2_bag(path: str | Path, scans: Iterable[Scan], *, scan_topic: str = "/scan",
                    odom_topic: str = "/odom", gt_topic: str | None = None,
-                   laser_tf: bool = True) -> Path:
-    """Write scans as a ROS 2 bag folder (sqlite3): LaserScan, Odometry (odom -> base_link),
-    optional ground-truth Odometry, and base_link -> laser on /tf_static (the first scan's
-    ``laser_pose_xytheta``) unless ``laser_tf`` is False."""
-    from rosbags.rosbag2 import Writer
+                   laser_tf: bool = True, storage: str = "sqlite3") -> Path:
+    """Write scans as a ROS 2 bag folder (``storage``: sqlite3 or mcap): LaserScan, Odometry
+    (odom -> base_link), optional ground-truth Odometry, and base_link -> laser on /tf_static
+    (the first scan's ``laser_pose_xytheta``) unless ``laser_tf`` is False."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
+    if storage not in ROS2_STORAGES:
+        raise ConfigError(f"unknown ROS 2 bag storage {storage!r}: {' | '.join(ROS2_STORAGES)}",
+                          field="storage")
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     ts = get_typestore(Stores.ROS2_HUMBLE)
     path = Path(path)
-    with Writer(path, version=8) as w:
+    with Writer(path, version=8, storage_plugin=plugin) as w:
         _write_bag(w, ts, list(scans), ros1=False, scan_topic=scan_topic,
                    odom_topic=odom_topic, gt_topic=gt_topic, laser_tf=laser_tf)
     return path

@@ -785,7 +785,7 @@ SCENARIO_STACK_YAML = "stack.yaml"
 
 
 def simulate(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: int = 3,
-             bag: bool = False, sim_config=None):
+             bag: bool = False, sim_config=None, bag_storage: str = "sqlite3"):
     """``gatmo simulate``: a scenario (:func:`gatmo.datasets.sim.simulate_scenario`) and beside
     it ``stack.yaml``, the stack configuration matched to the simulated robot
     (:func:`gatmo.pipeline.config.sim_stack_config` with the odometry alphas of the
@@ -798,6 +798,7 @@ def simulate(out_dir: str | Path, *, preset: str = "hall", runs: int = 4, seed: 
     from gatmo.pipeline.config import sim_stack_config
 
     scen = simulate_scenario(out_dir, preset=preset, runs=runs, seed=seed, bag=bag,
+                             bag_storage=bag_storage,
                              config=sim_config)
     stack = sim_stack_config((SimConfig.for_preset(preset) if sim_config is None
                               else sim_config).odom)

@@ -128,13 +128,19 @@ def test_metrics_known_answers():
     assert r["n_used"] == 2 and np.isclose(r["trans_mean_m"], 0.05)
 
 
-def test_rosbag_round_trip(tmp_path):
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_rosbag_round_trip(tmp_path, storage):
+    # mcap: what ROS 2 Jazzy records by default; read as the folder or its .mcap file
     from gatmo.datasets.rosbag import RosBag, write_ros2_bag
 
     scans = _scans(gt=True)
     for s in scans:
         s.laser_pose_xytheta = np.zeros(3)
-    write_ros2_bag(tmp_path / "b", scans, gt_topic="/base_pose_ground_truth")
+    write_ros2_bag(tmp_path / "b", scans, gt_topic="/base_pose_ground_truth", storage=storage)
+    files = {p.suffix for p in (tmp_path / "b").iterdir()}
+    assert files == {".yaml", ".db3" if storage == "sqlite3" else ".mcap"}
+    if storage == "mcap":
+        assert len(list(open_log(tmp_path / "b" / "b.mcap"))) == len(scans)
     back = list(open_log(tmp_path / "b"))
     assert len(back) == len(scans)
     for a, b in zip(scans, back, strict=True):

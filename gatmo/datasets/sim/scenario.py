@@ -138,16 +138,24 @@ def _r(a, nd: int = 6):
 
 
 def simulate_scenario(out_dir: str | Path, *, preset: str = "hall", runs: int = 4,
-                      seed: int = 3, bag: bool = False,
+                      seed: int = 3, bag: bool = False, bag_storage: str = "sqlite3",
                       config: SimConfig | None = None) -> ScenarioResult:
     """Write a scenario into ``out_dir``: ``map.yaml`` + ``map.pgm`` (layout L0), per run K the
     layout L_K = rearrange(L_{K-1}) driven through as ``run_K.clf`` (+ ``run_K_bag/``) with
     ``run_K.gt.tum``, and ``scenario.json`` (objects per run, changes, people tracks, initial
     poses). Deterministic for a seed. ``preset`` chooses the world; ``config`` (default
-    ``SimConfig.for_preset(preset)``) the parameters."""
+    ``SimConfig.for_preset(preset)``) the parameters; ``bag_storage`` the ROS 2 bags' storage
+    (sqlite3 or mcap)."""
     from gatmo.datasets.carmen import write_carmen
     from gatmo.datasets.tum import write_tum
     from gatmo.errors import ConfigError
+
+    if bag:
+        from gatmo.datasets.rosbag import ROS2_STORAGES
+
+        if bag_storage not in ROS2_STORAGES:  # before anything is written
+            raise ConfigError(f"unknown ROS 2 bag storage {bag_storage!r}: "
+                              f"{' | '.join(ROS2_STORAGES)}", field="--bag-storage")
     from gatmo.maps.io import save_map
 
     if runs < 1:
@@ -186,7 +194,8 @@ def simulate_scenario(out_dir: str | Path, *, preset: str = "hall", runs: int = 
             # not "run_K.bag": rosbags' AnyReader takes any *.bag path for a ROS 1 file
             shutil.rmtree(out / f"run_{k}_bag", ignore_errors=True)
             bags.append(write_ros2_bag(out / f"run_{k}_bag", scans,
-                                       gt_topic="/base_pose_ground_truth"))
+                                       gt_topic="/base_pose_ground_truth",
+                                       storage=bag_storage))
         run_docs.append({
             "run": k,
             "layout": f"L{k}",
