@@ -114,11 +114,9 @@ def summarize(path: str | Path, fmt: str | None = None) -> dict:
         return _json_summary(p)
     if name.endswith((".yaml", ".yml")):
         return _yaml_summary(p)
-    from gatmo.datasets.open import is_wean_map
+    from gatmo.datasets.wean import is_wean_map, load_wean_map
 
     if is_wean_map(p):
-        from gatmo.datasets.wean import load_wean_map
-
         return _grid_summary(load_wean_map(p))
     if name.endswith(".tum"):
         from gatmo.datasets.tum import read_tum

@@ -53,29 +53,13 @@ def open_log(path: str | Path, fmt: str | None = None, **kw):
     raise FormatError(f"unknown format {fmt!r}: {' | '.join(FORMATS)}", field="--format")
 
 
-def is_wean_map(path: str | Path) -> bool:
-    """Whether ``path`` is a CMU Wean Hall / Beeson-format map (``robot_specifications->...``
-    header, plain or gzip'd), not a map_server YAML."""
-    import gzip
-    import zlib
-
-    try:
-        with open(path, "rb") as f:
-            head = f.read(2)
-        opener = gzip.open if head == b"\x1f\x8b" else open
-        with opener(path, "rt", errors="replace") as fh:
-            # 64 characters: a header, or a binary file that is not one (never read whole)
-            return fh.read(64).lstrip().startswith("robot_specifications")
-    except (OSError, EOFError, zlib.error):
-        return False  # unreadable: load_map reports what is wrong with it
-
-
 def open_map(path: str | Path, **kw):
     """An OccupancyGrid from a map_server map (YAML + image) or a CMU Wean Hall map
-    (``wean.dat``, ``.gz`` or not), told apart by content; ``kw`` go to
-    :func:`gatmo.maps.io.load_map`."""
+    (``wean.dat``, ``.gz`` or not), told apart by content
+    (:func:`gatmo.datasets.wean.is_wean_map`); ``kw`` go to :func:`gatmo.maps.io.load_map`."""
+    from gatmo.datasets.wean import is_wean_map, load_wean_map
+
     if is_wean_map(path):
-        from gatmo.datasets.wean import load_wean_map
 
         return load_wean_map(path)
     from gatmo.maps.io import load_map

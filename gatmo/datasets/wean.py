@@ -27,6 +27,19 @@ def _open(path: Path):
     return gzip.open(path, "rt", errors="replace") if gz else open(path, errors="replace")
 
 
+def is_wean_map(path: str | Path) -> bool:
+    """Whether ``path`` is a CMU Wean Hall / Beeson-format map (``robot_specifications->...``
+    header, plain or gzip'd), not a map_server YAML."""
+    import zlib
+
+    try:
+        with _open(Path(path)) as fh:
+            # 64 characters: a header, or a binary file that is not one (never read whole)
+            return fh.read(64).lstrip().startswith("robot_specifications")
+    except (OSError, EOFError, zlib.error):
+        return False  # unreadable: load_map reports what is wrong with it
+
+
 class WeanLog:
     """A CMU ``robotdata`` log as a ScanSource (metres, laser pose relative to the base)."""
 

@@ -262,7 +262,8 @@ def test_info_tells_a_scenario_a_stack_config_and_ros_amcl_files_from_maps(tmp_p
 def test_open_map_reads_a_wean_format_map_by_content_and_commands_take_it(tmp_path):
     # `--map` takes a CMU Wean Hall map (the 16-833 course's format) as it takes a map_server
     # YAML; told apart by its header, whatever the file is called
-    from gatmo.datasets.open import is_wean_map, open_map
+    from gatmo.datasets.open import open_map
+    from gatmo.datasets.wean import is_wean_map
     from gatmo.maps.io import save_map
     from tests.helpers import make_scan, room_grid
 

@@ -149,6 +149,7 @@ def simulate_scenario(out_dir: str | Path, *, preset: str = "hall", runs: int = 
     from gatmo.datasets.carmen import write_carmen
     from gatmo.datasets.tum import write_tum
     from gatmo.errors import ConfigError
+    from gatmo.maps.io import save_map
 
     if bag:
         from gatmo.datasets.rosbag import ROS2_STORAGES
@@ -156,7 +157,6 @@ def simulate_scenario(out_dir: str | Path, *, preset: str = "hall", runs: int = 
         if bag_storage not in ROS2_STORAGES:  # before anything is written
             raise ConfigError(f"unknown ROS 2 bag storage {bag_storage!r}: "
                               f"{' | '.join(ROS2_STORAGES)}", field="--bag-storage")
-    from gatmo.maps.io import save_map
 
     if runs < 1:
         raise ConfigError(f"runs must be >= 1, got {runs}", field="runs")
