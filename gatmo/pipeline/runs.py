@@ -192,8 +192,7 @@ def vet_ground_truth(grid: OccupancyGrid, scans: list, gt: GroundTruth | None, l
     if not fracs or float(np.median(fracs)) >= MIN_KNOWN_FRACTION:
         return gt, []
     what = (f"{float(np.median(fracs)):.0%} of the log's returns at its poses fall on known map "
-            "cells (median of "
-            f"{len(fracs)} scans): it is not in the map's frame")
+            f"cells (median of {len(fracs)} scans): it is not in the map's frame")
     if not gt.source.endswith("(in-log)"):
         raise DataError(f"ground truth: {what}", file=gt.source)
     return None, [f"{log}: the ground truth in the log is not scored against: {what} (e.g. a "
