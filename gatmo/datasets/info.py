@@ -99,7 +99,11 @@ def _yaml_summary(path: Path) -> dict:
                     "sigma_hit_m": a.sigma_hit_m, "z_hit / z_rand": [a.z_hit, a.z_rand],
                     "alphas": [a.alpha1, a.alpha2, a.alpha3, a.alpha4],
                     "particles": [a.min_particles, a.max_particles],
-                    "update_min_d_m / _a_rad": [a.update_min_d_m, a.update_min_a_rad]}
+                    "update_min_d_m / _a_rad": [a.update_min_d_m, a.update_min_a_rad],
+                    # where localize / run / compare start without --initial-pose
+                    "initial_pose_xytheta": (list(a.initial_pose_xytheta)
+                                             if a.initial_pose_xytheta is not None
+                                             else "none (the log's ground truth, else global)")}
     from gatmo.datasets.open import open_map
 
     return _grid_summary(open_map(path))

@@ -248,9 +248,13 @@ def test_info_tells_a_scenario_a_stack_config_and_ros_amcl_files_from_maps(tmp_p
         assert s["preset"] == preset and (n is None or s["parameters_not_amcl_defaults"] == n)
     (tmp_path / "nav2.yaml").write_text("amcl:\n  ros__parameters:\n    z_hit: 0.95\n"
                                         "    alpha1: 0.05\n")
-    (tmp_path / "ros1.yaml").write_text("laser_z_hit: 0.9\nodom_alpha1: 0.1\n")
+    (tmp_path / "ros1.yaml").write_text("laser_z_hit: 0.9\nodom_alpha1: 0.1\n"
+                                        "initial_pose_x: 1.5\ninitial_pose_a: 0.3\n")
     nav2, ros1 = summarize(tmp_path / "nav2.yaml"), summarize(tmp_path / "ros1.yaml")
     assert nav2["kind"] == ros1["kind"] == "AMCL parameters"
+    # the start the commands take from the file, or that there is none
+    assert ros1["initial_pose_xytheta"] == [1.5, 0.0, 0.3]
+    assert nav2["initial_pose_xytheta"].startswith("none")
     assert nav2["alphas"][0] == 0.05 and nav2["z_hit / z_rand"][0] == 0.95
     assert ros1["alphas"][0] == 0.1 and ros1["z_hit / z_rand"][0] == 0.9
     assert summarize(scen.map_yaml)["kind"] == "map"
