@@ -30,7 +30,7 @@ from scipy import ndimage
 
 from gatmo.datasets.types import Scan
 from gatmo.geometry import compose, inverse, transform_points
-from gatmo.maps.grid import FREE, OCCUPIED, OccupancyGrid
+from gatmo.maps.grid import FREE, OCCUPIED, OccupancyGrid, add_counts
 from gatmo.maps.raycast import cast_rays, traverse_rays
 from gatmo.objects.config import GatmoConfig
 from gatmo.objects.matching import (
@@ -526,7 +526,7 @@ class GatmoMapper:
         """Add map-frame returns (N, 2) the map does not explain to this run's counts."""
         cu = self._grid.world_to_cell(points_xy)
         ok = self._grid.in_bounds(cu)
-        np.add.at(self._unexplained, (cu[ok, 1], cu[ok, 0]), 1)
+        add_counts(self._unexplained, cu[ok, 1], cu[ok, 0])
 
     def _fits_map(self, lp, scan: Scan, pts: np.ndarray, near_any: np.ndarray) -> float | str:
         """The map's test of the pose a scan is laid from (laser at ``lp``, returns ``pts``
@@ -769,7 +769,7 @@ class GatmoMapper:
         c = c[ok]
         own = self._near_owner[c[:, 1], c[:, 0]]
         keep = (own >= 0) | (self._near_dist[c[:, 1], c[:, 0]] > self.cfg.delta_W_m)
-        np.add.at(self._near_returns, (c[keep, 1], c[keep, 0]), 1)
+        add_counts(self._near_returns, c[keep, 1], c[keep, 0])
 
     def _explained(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(near any occupied cell, explained) per point (N,). S_free filtering (paper,
@@ -908,7 +908,7 @@ class GatmoMapper:
         cells, ray = traverse_rays(g, lp[:2], ends, exclude_end_m=self.cfg.absence_exclude_end_m)
         if not len(cells):
             return
-        np.add.at(self._free, (cells[:, 1], cells[:, 0]), 1)
+        add_counts(self._free, cells[:, 1], cells[:, 0])
         # rays that went on well beyond a cell: the evidence that a new object is gone again
         # (a chair grid smeared by pose jitter has cells just in front of the surface)
         beyond = np.hypot(*(g.cell_to_world(cells) - ends[ray]).T) > self.cfg.add_gone_beyond_m
@@ -944,9 +944,9 @@ class GatmoMapper:
         """Rays passing well beyond ``cells`` (K, 2): in ``_passed`` (add_max_passed_fraction)
         and, where a return has landed this run, in ``_passed_run`` (add_max_flicker: a thing
         that came mid-run and stayed has not come and gone)."""
-        np.add.at(self._passed, (cells[:, 1], cells[:, 0]), 1)
+        add_counts(self._passed, cells[:, 1], cells[:, 0])
         cells = cells[self._hit_run[cells[:, 1], cells[:, 0]] > 0]
-        np.add.at(self._passed_run, (cells[:, 1], cells[:, 0]), 1)
+        add_counts(self._passed_run, cells[:, 1], cells[:, 0])
 
     def _count_run_hits(self, lp, pts: np.ndarray) -> None:
         """The returns ``pts`` (N, 2) within add_gone_max_range_m, as the rays counted in
@@ -955,7 +955,7 @@ class GatmoMapper:
         near = pts[np.hypot(*(pts - lp[:2]).T) <= self.cfg.add_gone_max_range_m]
         c = g.world_to_cell(near)
         c = c[g.in_bounds(c)]
-        np.add.at(self._hit_run, (c[:, 1], c[:, 0]), 1)
+        add_counts(self._hit_run, c[:, 1], c[:, 0])
 
     def _surface_normals(self) -> tuple[np.ndarray, np.ndarray]:
         """Per cell of the current map (H, W): the unit normal of the occupied surface (x and

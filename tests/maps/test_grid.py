@@ -1,5 +1,7 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gatmo.errors import MapError
 from gatmo.maps.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
@@ -46,3 +48,22 @@ def test_equality_and_copy():
     assert g == h
     h.cells[0, 0] = OCCUPIED
     assert g != h
+
+
+@settings(max_examples=100, deadline=None)
+@given(data=st.data(), h=st.integers(1, 40), w=st.integers(1, 40),
+       n=st.integers(0, 300), dtype=st.sampled_from([np.int32, np.int64, np.int16]))
+def test_add_counts_is_np_add_at(data, h, w, n, dtype):
+    # GATMO's per-scan ray counts (seen free, passed, hits): the bincount form must count
+    # exactly as np.add.at, repeated cells included, and touch nothing else
+    from gatmo.maps.grid import add_counts
+
+    iy = np.array(data.draw(st.lists(st.integers(0, h - 1), min_size=n, max_size=n)), np.int64)
+    ix = np.array(data.draw(st.lists(st.integers(0, w - 1), min_size=n, max_size=n)), np.int64)
+    start = np.array(data.draw(st.lists(st.integers(0, 100), min_size=h * w, max_size=h * w)),
+                     dtype).reshape(h, w)
+    want, got = start.copy(), start.copy()
+    np.add.at(want, (iy, ix), 1)
+    add_counts(got, iy, ix)
+    np.testing.assert_array_equal(got, want)
+    assert got.dtype == dtype
