@@ -23,6 +23,8 @@ def compose(T_a_b: np.ndarray, T_b_c: np.ndarray) -> np.ndarray:
     x = T_a_b[..., 0] + c * T_b_c[..., 0] - s * T_b_c[..., 1]
     y = T_a_b[..., 1] + s * T_b_c[..., 0] + c * T_b_c[..., 1]
     th = wrap_angle(T_a_b[..., 2] + T_b_c[..., 2])
+    if T_a_b.ndim == 1 and T_b_c.ndim == 1:  # one pose: the same values, without np.stack's cost
+        return np.array([x, y, th])
     return np.stack([x, y, th], axis=-1)
 
 
@@ -33,6 +35,8 @@ def inverse(T_a_b: np.ndarray) -> np.ndarray:
     s = np.sin(T_a_b[..., 2])
     x = -c * T_a_b[..., 0] - s * T_a_b[..., 1]
     y = s * T_a_b[..., 0] - c * T_a_b[..., 1]
+    if T_a_b.ndim == 1:
+        return np.array([x, y, wrap_angle(-T_a_b[2])])
     return np.stack([x, y, wrap_angle(-T_a_b[..., 2])], axis=-1)
 
 

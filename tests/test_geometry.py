@@ -76,3 +76,18 @@ def test_nearest_index_and_points_to_beams():
     np.testing.assert_allclose(rng, [2.0, 1.0])
     np.testing.assert_allclose(bearing, [0.0, np.pi / 2], atol=1e-12)
     assert j.tolist() == [90, 180]
+
+
+def test_one_pose_compose_and_inverse_are_the_batched_ones_to_the_bit():
+    # compose / inverse of single poses skip np.stack: the values must be the batched path's
+    from gatmo.geometry import compose, inverse
+
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(2000, 3)) * [10.0, 10.0, 4.0]
+    b = rng.normal(size=(2000, 3)) * [10.0, 10.0, 4.0]
+    one = np.array([compose(x, y) for x, y in zip(a, b, strict=True)])
+    np.testing.assert_array_equal(one, np.array([compose(x[None], y[None])[0]
+                                                 for x, y in zip(a, b, strict=True)]))
+    np.testing.assert_array_equal(np.array([inverse(x) for x in a]),
+                                  np.array([inverse(x[None])[0] for x in a]))
+    assert compose(a[0], b[0]).shape == (3,) and inverse(a[0]).dtype == np.float64
