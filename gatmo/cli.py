@@ -41,6 +41,8 @@ PresetOpt = Annotated[
 ]
 PoseOpt = Annotated[str | None, typer.Option("--initial-pose", help="X,Y,YAW in the map frame.")]
 GlobalOpt = Annotated[bool, typer.Option("--global", help="Global localization.")]
+GroundTruthOpt = Annotated[Path | None, typer.Option(
+    "--ground-truth", help="TUM ground truth in the map frame (else the log's own, if any).")]
 
 
 
@@ -196,6 +198,7 @@ def localize(
     global_loc: GlobalOpt = False,
     fmt: FormatOpt = None,
     max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
+    ground_truth: GroundTruthOpt = None,
 ) -> None:
     """Monte Carlo localization of a log in a static map; writes the pose at every scan (TUM)."""
     from gatmo.pipeline.localize import run_localize
@@ -214,6 +217,7 @@ def localize(
             out_path=out,
             max_scans=max_scans,
             progress=update,
+            gt_path=ground_truth,
         )
     _print_mapping("localization", summary.as_dict())
     _print_warnings(summary.warnings)
@@ -235,6 +239,7 @@ def run(
     global_loc: GlobalOpt = False,
     fmt: FormatOpt = None,
     max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
+    ground_truth: GroundTruthOpt = None,
 ) -> None:
     """Full stack (localizer + scan matcher + GATMO) on one log: poses, objects, map, events."""
     from gatmo.pipeline.runs import run_gatmo
@@ -245,6 +250,7 @@ def run(
             map_yaml, log, out, objects_path=objects, params_path=params, config_path=config,
             preset=preset, initial_pose=_parse_pose(initial_pose),
             global_localization=global_loc, fmt=fmt, max_scans=max_scans, progress=update,
+            gt_path=ground_truth,
         )
     for row in summary.rows:
         _print_mapping(f"gatmo run -> {out}", row)

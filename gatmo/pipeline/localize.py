@@ -43,13 +43,15 @@ def run_localize(
     progress: Callable[[int, int | None], None] | None = None,
     seed: int = 0,
     config=None,
+    gt_path: str | Path | None = None,
 ) -> LocalizeSummary:
     """Localize ``log`` in the map; the initial pose comes from the argument, else the params
     file, else the log's first ground-truth pose, else global localization. The localizer's
     configuration: ``config`` (an :class:`AmclConfig`), else the ROS AMCL YAML
     ``params_path``, else the ``amcl`` section of the gatmo stack YAML ``config_path`` (what
     ``gatmo run --config`` takes, e.g. a simulated scenario's ``stack.yaml``) or of the named
-    stack configuration ``preset``, else AMCL's defaults."""
+    stack configuration ``preset``, else AMCL's defaults. Scored against ``gt_path`` (TUM, map
+    frame) if given, else the log's own ground truth."""
     from gatmo.datasets.open import open_map
     from gatmo.datasets.tum import write_tum
     from gatmo.localization.config import AmclConfig
@@ -105,7 +107,8 @@ def run_localize(
         ms_per_update=st["ms_per_update_median"], ms_per_scan=elapsed * 1e3 / n,
         skipped=st["skipped_no_valid_beams"], out_path=str(out_path),
     )
-    gt, summary.warnings = vet_ground_truth(grid, scans, ground_truth_of(scans, log, None), log)
+    gt, summary.warnings = vet_ground_truth(grid, scans, ground_truth_of(scans, log, gt_path),
+                                            log)
     if gt is not None:
         from gatmo.pipeline.runs import RunTrace
 

@@ -196,8 +196,7 @@ def vet_ground_truth(grid: OccupancyGrid, scans: list, gt: GroundTruth | None, l
     if not gt.source.endswith("(in-log)"):
         raise DataError(f"ground truth: {what}", file=gt.source)
     return None, [f"{log}: the ground truth in the log is not scored against: {what} (e.g. a "
-                  "simulator's own world frame); score against one in the map frame (gatmo compare "
-                  "--ground-truth)"]
+                  "simulator's own world frame); give one in the map frame with --ground-truth"]
 
 
 # ---------------------------------------------------------------------------- builders
@@ -531,8 +530,10 @@ def run_gatmo(
     run_id: int | None = None,
     max_scans: int | None = None,
     progress: Progress | None = None,
+    gt_path: str | Path | None = None,
 ) -> RunSummary:
     """``gatmo run``: the full stack on one log; writes poses.tum, objects.json, map, events.
+    Scored against ``gt_path`` (TUM, map frame) if given, else the log's own ground truth.
     ``run_id``: the run's number in the object map's history and events; None: the one after
     the last run laid on ``objects_path`` (1 on a fresh map). ``preset``: a named stack
     configuration (:data:`gatmo.pipeline.config.STACK_PRESETS`) instead of ``config_path``."""
@@ -551,7 +552,7 @@ def run_gatmo(
     if pose0 is not None:
         check_overlap(base, scans[0], pose0, log,
                       initial_pose_origin(initial_pose, cfg.amcl.initial_pose_xytheta))
-    gt, gt_warnings = vet_ground_truth(base, scans, ground_truth_of(scans, log, None), log)
+    gt, gt_warnings = vet_ground_truth(base, scans, ground_truth_of(scans, log, gt_path), log)
     if run_id is None:
         run_id = mapper.object_map.runs + 1
     trace = run_full(cfg, mapper, scans, cfg.seed, pose0, log=str(log), run_id=run_id,

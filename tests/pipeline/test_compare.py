@@ -163,6 +163,16 @@ def test_ground_truth_in_another_frame_is_not_scored_against(scen, tmp_path, cap
     s = json.loads((tmp_path / "c" / "summary.json").read_text())
     assert any("not in the map's frame" in w for w in s["warnings"])
     assert all("ate_rmse_m" not in r for r in s["logs"])
+    # localize and run take --ground-truth too, refused or scored the same way
+    capsys.readouterr()
+    loc = ["localize", "--map", str(shifted), "--log", log, "--initial-pose", start,
+           "--out", str(tmp_path / "q.tum")]
+    assert main([*loc, "--ground-truth", str(moved)]) == 0
+    out = capsys.readouterr().out
+    assert "ate_rmse_m" in out and "warning" not in out
+    assert main(["run", "--map", str(shifted), "--log", log, "--initial-pose", start,
+                 "--ground-truth", str(scen.gt[0]), "--out", str(tmp_path / "r")]) == 1
+    assert scen.gt[0].name in capsys.readouterr().err
 
 
 def test_vet_ground_truth_keeps_ground_truth_that_puts_the_scans_on_the_map():
