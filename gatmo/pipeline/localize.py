@@ -19,13 +19,41 @@ class LocalizeSummary:
     ms_per_scan: float
     skipped: int
     out_path: str
+    # median over the log's second half of the share of each scan's returns the map explains
+    # at the estimate (:func:`map_explained`): near 1 where the localizer follows the map
+    map_explained: float = float("nan")
     errors: dict = field(default_factory=dict)
-    warnings: list = field(default_factory=list)  # runs.vet_ground_truth
+    warnings: list = field(default_factory=list)  # runs.vet_ground_truth, a lost localizer
 
     def as_dict(self) -> dict:
         d = {k: v for k, v in self.__dict__.items() if k not in ("errors", "warnings")}
         d.update(self.errors)
         return d
+
+
+#: a return within this of an occupied map cell is explained by the map (:func:`map_explained`)
+EXPLAINED_WITHIN_M = 0.2
+#: below this median share over a log's second half, ``localize`` warns that the localizer is
+#: likely lost (or the map is not this place's)
+EXPLAINED_WARN_BELOW = 0.5
+
+
+def map_explained(grid, scans: list, poses_xytheta: np.ndarray,
+                  within_m: float = EXPLAINED_WITHIN_M) -> np.ndarray:
+    """Per scan, the share (N,) of its returns that lie within ``within_m`` of an occupied cell
+    of ``grid`` when laid at the estimate ``poses_xytheta`` (N, 3), map frame; NaN for a scan
+    without returns. What a user sees in rviz as the scan lying on the map, without ground
+    truth: a localizer that follows the map explains most of them (clutter and people aside)."""
+    from gatmo.geometry import compose, transform_points
+    from gatmo.maps.likelihood import LikelihoodField
+
+    field = LikelihoodField(grid, 2.0 * within_m)
+    out = np.full(len(scans), np.nan)
+    for i, (s, p) in enumerate(zip(scans, poses_xytheta, strict=True)):
+        pts = transform_points(compose(p, s.laser_pose_xytheta), s.points_laser_xy())
+        if len(pts):
+            out[i] = float(np.mean(field.distance_at(pts) < within_m))
+    return out
 
 
 def run_localize(
@@ -109,6 +137,16 @@ def run_localize(
     )
     gt, summary.warnings = vet_ground_truth(grid, scans, ground_truth_of(scans, log, gt_path),
                                             log)
+    second = map_explained(grid, scans[n // 2:], poses[n // 2:])
+    if np.isfinite(second).any():
+        summary.map_explained = float(np.nanmedian(second))
+        if summary.map_explained < EXPLAINED_WARN_BELOW:
+            summary.warnings.append(
+                f"{log}: over the log's second half the map explains a median of "
+                f"{summary.map_explained:.0%} of a scan's returns at the estimate (within "
+                f"{EXPLAINED_WITHIN_M:g} m of a wall): the localizer is likely lost, or the map "
+                "is not this place's. Give the start (--initial-pose X,Y,YAW); global "
+                "localization needs particles for the whole map (amcl.max_particles)")
     if gt is not None:
         from gatmo.pipeline.runs import RunTrace
 
