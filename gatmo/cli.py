@@ -534,6 +534,9 @@ def eval_trajectory(
         "--correct-scale", help="Fit a scale too (implies --align).")] = False,
     stamp_offset: Annotated[float, typer.Option(
         "--stamp-offset", help="Seconds added to the estimate's stamps.")] = 0.0,
+    rpe_delta: Annotated[float | None, typer.Option(
+        "--rpe-delta", min=1e-6, help="Also the relative pose error over this much travel [m] "
+        "(as evo_rpe --delta_unit m).")] = None,
 ) -> None:
     """Score a trajectory: position error against ground truth (no alignment unless --align)
     and/or the relations error of the SLAM benchmark (Kümmerle et al. 2009)."""
@@ -541,7 +544,7 @@ def eval_trajectory(
 
     res = evaluate_trajectory(poses, gt_path=ground_truth, relations_path=relations,
                               align=align, correct_scale=correct_scale,
-                              stamp_offset_s=stamp_offset)
+                              stamp_offset_s=stamp_offset, rpe_delta_m=rpe_delta)
     _print_mapping(f"eval {poses.name}", res)
 
 

@@ -86,6 +86,46 @@ def ate(
     )
 
 
+def rpe(
+    stamps_s: np.ndarray,
+    est_xytheta: np.ndarray,
+    gt_stamps_s: np.ndarray,
+    gt_xytheta: np.ndarray,
+    *,
+    delta_m: float = 1.0,
+    max_dt_s: float = 0.05,
+) -> dict:
+    """Relative pose error over ``delta_m`` of travel (as evo's ``evo_rpe --delta 1 --delta_unit
+    m``): for each estimate pose i with ground truth, the first later pose j the ground truth
+    has travelled ``delta_m`` to; the error of the estimate's motion i -> j against the ground
+    truth's, e = relative(gt_ij, est_ij). Frame-free: no alignment is needed. Returns
+    trans_rmse_m, trans_mean_m, trans_median_m, rot_mean_deg and n (pairs)."""
+    t = np.asarray(stamps_s, dtype=float)
+    est = np.asarray(est_xytheta, dtype=float)
+    gt_t = np.asarray(gt_stamps_s, dtype=float)
+    ok = (t >= gt_t[0] - max_dt_s) & (t <= gt_t[-1] + max_dt_s)
+    nan = float("nan")
+    if ok.sum() < 2:
+        return dict(trans_rmse_m=nan, trans_mean_m=nan, trans_median_m=nan, rot_mean_deg=nan,
+                    n=0)
+    g = interpolate_poses(gt_t, gt_xytheta, t[ok])
+    e_ok = est[ok]
+    travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(g[:, :2], axis=0).T))])
+    i = np.arange(len(g))
+    j = np.searchsorted(travel, travel + delta_m)  # first pose delta_m of travel on
+    keep = j < len(g)
+    i, j = i[keep], j[keep]
+    if len(i) == 0:
+        return dict(trans_rmse_m=nan, trans_mean_m=nan, trans_median_m=nan, rot_mean_deg=nan,
+                    n=0)
+    err = relative(relative(g[i], g[j]), relative(e_ok[i], e_ok[j]))
+    tr = np.hypot(err[:, 0], err[:, 1])
+    return dict(trans_rmse_m=float(np.sqrt(np.mean(tr**2))), trans_mean_m=float(tr.mean()),
+                trans_median_m=float(np.median(tr)),
+                rot_mean_deg=float(np.degrees(np.mean(np.abs(wrap_angle(err[:, 2]))))),
+                n=int(len(i)))
+
+
 def relations_error(stamps_s, poses_xytheta, relations, *, max_dt_s: float = 0.002) -> dict:
     """Kümmerle 2009: for each relation (t1, t2, rel), the error of the estimated relative pose.
 

@@ -18,6 +18,7 @@ def evaluate_trajectory(
     align: bool = False,
     correct_scale: bool = False,
     stamp_offset_s: float = 0.0,
+    rpe_delta_m: float | None = None,
     max_dt_s: float = 0.05,
     relations_max_dt_s: float = 0.002,
 ) -> dict:
@@ -32,8 +33,9 @@ def evaluate_trajectory(
     pose within ``relations_max_dt_s`` of both its stamps. ``stamp_offset_s`` is added to the
     estimate's stamps first (e.g. radish's ``intel-corrected`` log runs 976052857.33753 s
     behind the Intel bag). Returns a flat dict: ``poses``; ``ate_*`` with ground truth;
-    ``rel_*`` with relations."""
-    from gatmo.datasets.metrics import ate, relations_error
+    ``rel_*`` with relations; ``rpe_*``, with ground truth and ``rpe_delta_m``, the relative
+    pose error over that much travel (:func:`gatmo.datasets.metrics.rpe`, frame-free)."""
+    from gatmo.datasets.metrics import ate, relations_error, rpe
     from gatmo.datasets.tum import read_tum
 
     if gt_path is None and relations_path is None:
@@ -61,6 +63,11 @@ def evaluate_trajectory(
             out["T_gt_est"] = [round(v, 6) for v in a["T_gt_est"]]
         if correct_scale:
             out["scale"] = round(a["scale"], 6)
+        if rpe_delta_m is not None:
+            e = rpe(t, p, gt_t, gt_p, delta_m=rpe_delta_m, max_dt_s=max_dt_s)
+            out.update(rpe_delta_m=rpe_delta_m, rpe_pairs=e["n"],
+                       rpe_trans_rmse_m=e["trans_rmse_m"], rpe_trans_median_m=e["trans_median_m"],
+                       rpe_rot_mean_deg=e["rot_mean_deg"])
     if relations_path is not None:
         from gatmo.datasets.relations import read_relations
 

@@ -103,3 +103,27 @@ def test_real_intel_corrected_poses_against_the_benchmark_s_relations(tmp_path, 
                             stamp_offset_s=976052857.33753)
     assert r["rel_used"] == 40
     assert abs(r["rel_trans_mean_m"] - 0.043) < 0.001 and abs(r["rel_rot_mean_deg"] - 0.70) < 0.01
+
+
+def test_rpe_is_frame_free_and_measures_a_scale_error():
+    from gatmo.datasets.metrics import rpe
+
+    t, gt = _path(300)
+    moved = compose([5.0, -2.0, 0.7], gt)  # the same motion in another frame: no error
+    e = rpe(t, moved, t, gt, delta_m=1.0)
+    assert e["n"] > 200 and e["trans_rmse_m"] < 1e-9 and e["rot_mean_deg"] < 1e-9
+    # a straight run at 1.1 x the true speed: 0.1 m of error per metre of travel
+    line = np.column_stack([np.arange(300) * 0.05, np.zeros(300), np.zeros(300)])
+    e = rpe(t, line * [1.1, 1.0, 1.0], t, line, delta_m=1.0)
+    assert e["trans_median_m"] == pytest.approx(0.1, abs=1e-6)
+    assert e["n"] == 300 - 20  # pairs 20 poses (1 m) apart
+
+
+def test_eval_cli_reports_rpe(tmp_path, capsys):
+    t, gt = _path()
+    write_tum(tmp_path / "gt.tum", t, gt)
+    write_tum(tmp_path / "est.tum", t, compose([1.0, 2.0, 0.3], gt))
+    assert main(["eval", str(tmp_path / "est.tum"), "--ground-truth", str(tmp_path / "gt.tum"),
+                 "--rpe-delta", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "rpe_trans_rmse_m" in out and "rpe_pairs" in out
