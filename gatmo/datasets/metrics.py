@@ -36,6 +36,14 @@ def align_se2(src_xy: np.ndarray, dst_xy: np.ndarray, *, with_scale: bool = Fals
     return np.array([t[0], t[1], theta]), scale
 
 
+def _ground_truth_at(t: np.ndarray, gt_stamps_s, gt_xytheta, max_dt_s: float):
+    """(mask (N,) of the stamps ``t`` within ``max_dt_s`` of the ground truth's span, the
+    ground truth interpolated at those stamps (M, 3))."""
+    gt_t = np.asarray(gt_stamps_s, dtype=float)
+    ok = (t >= gt_t[0] - max_dt_s) & (t <= gt_t[-1] + max_dt_s)
+    return ok, (interpolate_poses(gt_t, gt_xytheta, t[ok]) if ok.any() else np.zeros((0, 3)))
+
+
 def ate(
     stamps_s: np.ndarray,
     est_xytheta: np.ndarray,
@@ -59,13 +67,11 @@ def ate(
     """
     t = np.asarray(stamps_s, dtype=float)
     est = np.asarray(est_xytheta, dtype=float)
-    gt_t = np.asarray(gt_stamps_s, dtype=float)
-    ok = (t >= gt_t[0] - max_dt_s) & (t <= gt_t[-1] + max_dt_s)
+    ok, g = _ground_truth_at(t, gt_stamps_s, gt_xytheta, max_dt_s)
     if not ok.any():
         nan = float("nan")
         return dict(rmse_m=nan, median_m=nan, max_m=nan, mean_rot_deg=nan, lost_fraction=nan,
                     n=0)
-    g = interpolate_poses(gt_t, gt_xytheta, t[ok])
     extra = {}
     if align:
         T, scale = align_se2(est[ok, :2], g[:, :2], with_scale=with_scale)
@@ -102,13 +108,11 @@ def rpe(
     trans_rmse_m, trans_mean_m, trans_median_m, rot_mean_deg and n (pairs)."""
     t = np.asarray(stamps_s, dtype=float)
     est = np.asarray(est_xytheta, dtype=float)
-    gt_t = np.asarray(gt_stamps_s, dtype=float)
-    ok = (t >= gt_t[0] - max_dt_s) & (t <= gt_t[-1] + max_dt_s)
+    ok, g = _ground_truth_at(t, gt_stamps_s, gt_xytheta, max_dt_s)
     nan = float("nan")
     if ok.sum() < 2:
         return dict(trans_rmse_m=nan, trans_mean_m=nan, trans_median_m=nan, rot_mean_deg=nan,
                     n=0)
-    g = interpolate_poses(gt_t, gt_xytheta, t[ok])
     e_ok = est[ok]
     travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(g[:, :2], axis=0).T))])
     i = np.arange(len(g))
