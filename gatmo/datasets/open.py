@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from contextlib import closing
+from itertools import islice
 from pathlib import Path
 
 from gatmo.datasets._text import iter_lines
@@ -21,17 +23,19 @@ def sniff_format(path: str | Path) -> str:
         raise FormatError("a folder without metadata.yaml: not a ROS 2 bag", file=p)
     if p.suffix in (".bag", ".db3", ".mcap"):
         return "rosbag"
-    # iter_lines turns a corrupt gzip stream into a FormatError naming the file
-    for _, (_, line) in zip(range(200), iter_lines(p), strict=False):
-        parts = line.split()
-        if not parts or parts[0].startswith("#"):
-            continue
-        if parts[0] == "L" and len(parts) == 188:
-            return "wean"
-        if parts[0] == "O" and len(parts) == 5:
-            return "wean"
-        if parts[0].isupper() and parts[0].isalnum():
-            return "carmen"
+    # iter_lines turns a corrupt gzip stream into a FormatError naming the file; closing()
+    # shuts the file when sniffing stops early
+    with closing(iter_lines(p)) as lines:
+        for _, line in islice(lines, 200):
+            parts = line.split()
+            if not parts or parts[0].startswith("#"):
+                continue
+            if parts[0] == "L" and len(parts) == 188:
+                return "wean"
+            if parts[0] == "O" and len(parts) == 5:
+                return "wean"
+            if parts[0].isupper() and parts[0].isalnum():
+                return "carmen"
     raise FormatError(f"unknown log format; use --format {' | '.join(FORMATS)}", file=p)
 
 

@@ -357,6 +357,13 @@ def _write_bag(writer, ts, scans: list[Scan], *, ros1: bool, scan_topic, odom_to
 ROS2_STORAGES = ("sqlite3", "mcap")
 
 
+def check_ros2_storage(storage: str, field: str = "storage") -> None:
+    """A ConfigError naming ``field`` unless ``storage`` is one of :data:`ROS2_STORAGES`."""
+    if storage not in ROS2_STORAGES:
+        raise ConfigError(f"unknown ROS 2 bag storage {storage!r}: {' | '.join(ROS2_STORAGES)}",
+                          field=field)
+
+
 def write_ros2_bag(path: str | Path, scans: Iterable[Scan], *, scan_topic: str = "/scan",
                    odom_topic: str = "/odom", gt_topic: str | None = None,
                    laser_tf: bool = True, storage: str = "sqlite3") -> Path:
@@ -366,9 +373,7 @@ def write_ros2_bag(path: str | Path, scans: Iterable[Scan], *, scan_topic: str =
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
-    if storage not in ROS2_STORAGES:
-        raise ConfigError(f"unknown ROS 2 bag storage {storage!r}: {' | '.join(ROS2_STORAGES)}",
-                          field="storage")
+    check_ros2_storage(storage)
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     ts = get_typestore(Stores.ROS2_HUMBLE)
     path = Path(path)

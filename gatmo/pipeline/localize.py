@@ -39,15 +39,18 @@ EXPLAINED_WARN_BELOW = 0.5
 
 
 def map_explained(grid, scans: list, poses_xytheta: np.ndarray,
-                  within_m: float = EXPLAINED_WITHIN_M) -> np.ndarray:
+                  within_m: float = EXPLAINED_WITHIN_M, field=None) -> np.ndarray:
     """Per scan, the share (N,) of its returns that lie within ``within_m`` of an occupied cell
     of ``grid`` when laid at the estimate ``poses_xytheta`` (N, 3), map frame; NaN for a scan
     without returns. What a user sees in rviz as the scan lying on the map, without ground
-    truth: a localizer that follows the map explains most of them (clutter and people aside)."""
+    truth: a localizer that follows the map explains most of them (clutter and people aside).
+    ``field``: a :class:`gatmo.maps.likelihood.LikelihoodField` of ``grid`` already built (the
+    localizer's), used if it reaches ``within_m``."""
     from gatmo.geometry import compose, transform_points
     from gatmo.maps.likelihood import LikelihoodField
 
-    field = LikelihoodField(grid, 2.0 * within_m)
+    if field is None or field.max_dist_m <= within_m:
+        field = LikelihoodField(grid, 2.0 * within_m)
     out = np.full(len(scans), np.nan)
     for i, (s, p) in enumerate(zip(scans, poses_xytheta, strict=True)):
         pts = transform_points(compose(p, s.laser_pose_xytheta), s.points_laser_xy())
@@ -137,7 +140,7 @@ def run_localize(
     )
     gt, summary.warnings = vet_ground_truth(grid, scans, ground_truth_of(scans, log, gt_path),
                                             log)
-    second = map_explained(grid, scans[n // 2:], poses[n // 2:])
+    second = map_explained(grid, scans[n // 2:], poses[n // 2:], field=loc.field)
     if np.isfinite(second).any():
         summary.map_explained = float(np.nanmedian(second))
         if summary.map_explained < EXPLAINED_WARN_BELOW:

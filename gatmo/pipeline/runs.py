@@ -70,6 +70,7 @@ class GroundTruth:
     stamps_s: np.ndarray
     poses_xytheta: np.ndarray
     source: str
+    in_log: bool = False  # carried in the log's scans, not a file the user gave
 
 
 def load_scans(log: str | Path, fmt: str | None = None, max_scans: int | None = None) -> list:
@@ -112,8 +113,8 @@ def ground_truth_of(scans: list, log: str | Path, gt_path: str | Path | None) ->
     if sum(have) >= max(2, len(scans) // 2):
         idx = [i for i, h in enumerate(have) if h]
         return GroundTruth(
-            stamps[idx], np.array([scans[i].gt_pose_xytheta for i in idx]), f"{log} (in-log)"
-        )
+            stamps[idx], np.array([scans[i].gt_pose_xytheta for i in idx]), f"{log} (in-log)",
+            in_log=True)
     return None
 
 
@@ -193,7 +194,7 @@ def vet_ground_truth(grid: OccupancyGrid, scans: list, gt: GroundTruth | None, l
         return gt, []
     what = (f"{float(np.median(fracs)):.0%} of the log's returns at its poses fall on known map "
             f"cells (median of {len(fracs)} scans): it is not in the map's frame")
-    if not gt.source.endswith("(in-log)"):
+    if not gt.in_log:
         raise DataError(f"ground truth: {what}", file=gt.source)
     return None, [f"{log}: the ground truth in the log is not scored against: {what} (e.g. a "
                   "simulator's own world frame); give one in the map frame with --ground-truth"]

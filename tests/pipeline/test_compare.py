@@ -184,11 +184,12 @@ def test_vet_ground_truth_keeps_ground_truth_that_puts_the_scans_on_the_map():
     poses = np.array([[2.0 + 0.1 * i, 2.0, 0.3] for i in range(20)])
     scans = [make_scan(grid, p, max_range_m=4.0, stamp_s=0.1 * i) for i, p in enumerate(poses)]
     stamps = np.array([s.stamp_s for s in scans])
-    right = GroundTruth(stamps, poses, "log (in-log)")
+    right = GroundTruth(stamps, poses, "log (in-log)", in_log=True)
     assert vet_ground_truth(grid, scans, right, "log") == (right, [])
     assert vet_ground_truth(grid, scans, None, "log") == (None, [])
     off = poses + [0.0, 30.0, 0.0]
-    gt, warned = vet_ground_truth(grid, scans, GroundTruth(stamps, off, "log (in-log)"), "log")
+    in_log = GroundTruth(stamps, off, "log (in-log)", in_log=True)
+    gt, warned = vet_ground_truth(grid, scans, in_log, "log")
     assert gt is None and len(warned) == 1 and warned[0].startswith("log: ")
     with pytest.raises(DataError, match="gt.tum.*not in the map's frame"):
         vet_ground_truth(grid, scans, GroundTruth(stamps, off, "gt.tum"), "log")

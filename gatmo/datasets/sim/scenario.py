@@ -152,11 +152,9 @@ def simulate_scenario(out_dir: str | Path, *, preset: str = "hall", runs: int = 
     from gatmo.maps.io import save_map
 
     if bag:
-        from gatmo.datasets.rosbag import ROS2_STORAGES
+        from gatmo.datasets.rosbag import check_ros2_storage
 
-        if bag_storage not in ROS2_STORAGES:  # before anything is written
-            raise ConfigError(f"unknown ROS 2 bag storage {bag_storage!r}: "
-                              f"{' | '.join(ROS2_STORAGES)}", field="--bag-storage")
+        check_ros2_storage(bag_storage, field="--bag-storage")  # before anything is written
 
     if runs < 1:
         raise ConfigError(f"runs must be >= 1, got {runs}", field="runs")
