@@ -21,6 +21,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",
 )
 map_app = typer.Typer(help="Make occupancy maps.", no_args_is_help=True)
 config_app = typer.Typer(help="Show or write configuration files.", no_args_is_help=True)
@@ -546,6 +547,55 @@ def eval_trajectory(
                               align=align, correct_scale=correct_scale,
                               stamp_offset_s=stamp_offset, rpe_delta_m=rpe_delta)
     _print_mapping(f"eval {poses.name}", res)
+
+
+@app.command()
+def calibrate(
+    log: Annotated[Path, typer.Argument(help="Log or bag with scans and odometry.")],
+    reference: Annotated[Path | None, typer.Option(
+        "--reference", help="Reference poses of the robot (TUM, any fixed frame), e.g. from "
+        "gatmo map build --poses-out; else the log's own ground truth.")] = None,
+    stamp_offset: Annotated[float, typer.Option(
+        "--stamp-offset", help="Seconds added to the reference's stamps.")] = 0.0,
+    params: ParamsOpt = None,
+    config: ConfigOpt = None,
+    preset: PresetOpt = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="Write the fitted alphas as AMCL YAML (Nav2's layout, or ROS 1's when "
+        "--params is a ROS 1 file).")] = None,
+    fmt: FormatOpt = None,
+    max_scans: Annotated[int | None, typer.Option("--max-scans", help="At most this many "
+                                                  "scans.")] = None,
+) -> None:
+    """Fit AMCL's odometry noise (alpha1-4, alpha5 for omni) to a log against reference poses.
+
+    The fit is made at the update thresholds and odometry model of the AMCL parameters given
+    (else AMCL's defaults). z std is the RMS of the errors over the standard deviation the
+    alphas predict: 1 when they predict the errors, above 1 when they are too small."""
+    from gatmo.pipeline.calibrate import calibrate_odometry
+
+    res = calibrate_odometry(log, reference_path=reference, stamp_offset_s=stamp_offset,
+                             params_path=params, config_path=config, preset=preset, fmt=fmt,
+                             max_scans=max_scans, out_path=out)
+    from rich.table import Table
+
+    title = f"calibrate {log.name}: {res['model']}, {res['steps']} steps of " \
+            f"{res['update_min_d_m']:g} m / {res['update_min_a_rad']:g} rad"
+    table = Table(title=title, min_width=len(title))
+    for col in ("", "current", "fitted", "fitted, held out"):
+        table.add_column(col, justify="left" if not col else "right")
+    for i, (c, f) in enumerate(zip(res["current_alphas"], res["alphas"], strict=True)):
+        table.add_row(f"alpha{i + 1}", f"{c:.4g}", f"{f:.4g}", "")
+    for term, c, f, h in zip(res["terms"], res["z_std_current"], res["z_std_fitted"],
+                             res["z_std_holdout"], strict=True):
+        table.add_row(f"z std {term}", f"{c:.3f}", f"{f:.3f}", f"{h:.3f}")
+    _console().print(table)
+    _console().print(
+        f"reference {res['reference']} at {res['reference_coverage']:.0%} of the scans; "
+        f"{res['rejected']} outlier steps trimmed; travel scale {res['trans_scale']:.4f}, "
+        f"turn scale {res['rot_scale']:.4f} (reference over odometry)"
+        + (f"; written to {res['out']}" if "out" in res else ""), soft_wrap=True)
+    _print_warnings(res["warnings"])
 
 
 # ---------------------------------------------------------------------- entry point

@@ -157,3 +157,36 @@ def load_amcl_yaml(path: str | Path) -> AmclConfig:
         raise validation_to_config_error(exc, file=path, lines=lines, prefix=prefix,
                                          key_names=key_names) from None
     return cfg
+
+
+def amcl_yaml_dialect(path: str | Path) -> str:
+    """``"nav2"`` when the AMCL YAML at ``path`` holds ``ros__parameters``, else ``"ros1"``."""
+    data, _ = read_yaml(Path(path))
+    if isinstance(data, dict) and isinstance(data.get("amcl"), dict):
+        data = data["amcl"]
+    return "nav2" if isinstance(data, dict) and "ros__parameters" in data else "ros1"
+
+
+def amcl_yaml_text(values: dict, dialect: str = "nav2") -> str:
+    """AMCL parameter YAML (``"nav2"``: ``amcl: ros__parameters:``, ``"ros1"``: flat) holding
+    ``values``, a mapping of :class:`AmclConfig` field -> value; :func:`load_amcl_yaml` reads it
+    back. Nav2 has no ROS 1 ``diff`` / ``omni`` (variance-as-std) models: refused."""
+    import yaml
+
+    table = dict(COMMON, **(NAV2 if dialect == "nav2" else ROS1))
+    key_of = {}
+    for key, fld in table.items():
+        key_of.setdefault(fld, key)  # the first ROS name of a field (pf_err after kld_err)
+    out = {}
+    for fld, value in values.items():
+        if fld not in key_of:
+            raise ConfigError(f"no {dialect} AMCL parameter for {fld!r}", field=fld)
+        if fld == "odom_model" and dialect == "nav2":
+            names = {v: k for k, v in reversed(NAV2_ROBOT_MODELS.items())}
+            if value not in names:
+                raise ConfigError(f"Nav2 has no {value!r} odometry model (ROS 1 only)",
+                                  field="robot_model_type")
+            value = names[value]
+        out[key_of[fld]] = value
+    doc = {"amcl": {"ros__parameters": out}} if dialect == "nav2" else out
+    return yaml.safe_dump(doc, sort_keys=False)

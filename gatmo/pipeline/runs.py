@@ -88,8 +88,10 @@ def load_scans(log: str | Path, fmt: str | None = None, max_scans: int | None = 
     return scans
 
 
-def ground_truth_of(scans: list, log: str | Path, gt_path: str | Path | None) -> GroundTruth | None:
-    """Ground truth from a TUM file, else from the scans' own gt poses, else None.
+def ground_truth_of(scans: list, log: str | Path, gt_path: str | Path | None, *,
+                    stamp_offset_s: float = 0.0) -> GroundTruth | None:
+    """Ground truth from a TUM file (``stamp_offset_s`` added to its stamps), else from the
+    scans' own gt poses, else None.
 
     A TUM file whose stamps do not cover the log is refused: scoring against it would be
     meaningless.
@@ -101,6 +103,7 @@ def ground_truth_of(scans: list, log: str | Path, gt_path: str | Path | None) ->
         gt_s, gt_p = read_tum(gt_path)
         if len(gt_s) == 0:
             raise DataError("ground truth is empty", file=gt_path)
+        gt_s = np.asarray(gt_s, dtype=float) + stamp_offset_s
         covered = np.mean((stamps >= gt_s[0] - 0.05) & (stamps <= gt_s[-1] + 0.05))
         if covered < 0.5:
             raise DataError(

@@ -1,0 +1,173 @@
+"""``gatmo calibrate``: AMCL's odometry alphas fitted to a log against reference poses.
+
+The reference is a TUM trajectory (ground truth, or what ``gatmo map build --poses-out`` writes
+for a raw log: only relative motions are used, so any fixed frame will do) or the log's own
+ground truth. The fit (:func:`gatmo.localization.calibration.fit_odometry_noise`) is made at the
+update thresholds and odometry model of the AMCL configuration given (else AMCL's defaults),
+checked on held-out data (fitted on the log's first half, scored on its second), and the
+current alphas are scored on the same steps, so a user sees how far off they are.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from gatmo.errors import DataError
+from gatmo.geometry import relative
+
+#: a scan has a reference when one of the reference's samples is this close in time
+MAX_REFERENCE_DT_S = 0.05
+#: ... or when the reference's samples either side are at most this far apart (interpolated)
+MAX_REFERENCE_GAP_S = 1.0
+#: steps longer on average than this many times the update thresholds: the fit is for them
+COARSE_STEPS = 1.5
+
+
+def reference_at(stamps_s: np.ndarray, ref_stamps_s: np.ndarray, ref_xytheta: np.ndarray,
+                 max_dt_s: float = MAX_REFERENCE_DT_S,
+                 max_gap_s: float = MAX_REFERENCE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
+    """(valid (N,), poses (N, 3)): the reference at ``stamps_s``, interpolated, where it has a
+    sample within ``max_dt_s`` or samples at most ``max_gap_s`` apart either side (NaN
+    elsewhere). A sparse reference (a SLAM's keyframes) thus counts only at its own stamps."""
+    from gatmo.geometry import interpolate_poses
+
+    t = np.asarray(ref_stamps_s, dtype=float)
+    order = np.argsort(t, kind="stable")
+    t, p = t[order], np.asarray(ref_xytheta, dtype=float)[order]
+    q = np.asarray(stamps_s, dtype=float)
+    j = np.searchsorted(t, q)
+    lo, hi = np.clip(j - 1, 0, len(t) - 1), np.clip(j, 0, len(t) - 1)
+    near = np.minimum(np.abs(t[hi] - q), np.abs(t[lo] - q)) <= max_dt_s
+    inside = (q >= t[0]) & (q <= t[-1])
+    valid = near | (inside & (t[hi] - t[lo] <= max_gap_s))
+    out = np.full((len(q), 3), np.nan)
+    if valid.any():
+        out[valid] = interpolate_poses(t, p, q[valid])
+    return valid, out
+
+
+def calibrate_odometry(
+    log: str | Path,
+    *,
+    reference_path: str | Path | None = None,
+    stamp_offset_s: float = 0.0,
+    params_path: str | Path | None = None,
+    config_path: str | Path | None = None,
+    preset: str | None = None,
+    fmt: str | None = None,
+    max_scans: int | None = None,
+    out_path: str | Path | None = None,
+) -> dict:
+    """Fit AMCL's odometry alphas to ``log``'s odometry against the reference.
+
+    Args:
+        log: a log or bag with scans and odometry (the odometry at the scans' stamps is used).
+        reference_path: TUM reference poses of the robot base; else the log's own ground truth.
+        stamp_offset_s: added to the reference's stamps (radish's ``intel-corrected`` runs
+            976052857.33753 s behind the Intel bag).
+        params_path / config_path / preset: the AMCL configuration whose odometry model and
+            update thresholds the fit is made at, and whose alphas are scored (as ``localize``).
+        out_path: write the fitted alphas, model and thresholds as AMCL YAML here (Nav2's
+            layout, or ROS 1's when ``params_path`` is a ROS 1 file).
+
+    Returns:
+        a flat dict: ``model``, ``update_min_d_m``, ``update_min_a_rad``, ``steps``,
+        ``rejected``, ``alphas`` (fitted), ``current_alphas``, ``z_std_*`` (RMS of the
+        normalized errors per component: 1 when the alphas predict the errors; ``fitted``
+        in-sample, ``holdout`` fitted on the first half and scored on the second,
+        ``current`` the configuration's alphas), ``trans_scale``, ``rot_scale`` and
+        ``mean_error`` (biases the alphas absorb), ``reference``, ``out``.
+
+    Raises:
+        DataError: no reference, or too few steps with one.
+    """
+    from gatmo._io import atomic_write_text
+    from gatmo.localization.calibration import fit_odometry_noise, step_z_std, update_steps
+    from gatmo.localization.config import AmclConfig
+    from gatmo.localization.params import amcl_yaml_dialect, amcl_yaml_text, load_amcl_yaml
+    from gatmo.pipeline.runs import ground_truth_of, load_scans
+
+    if params_path is not None:
+        cfg = load_amcl_yaml(params_path)
+    elif config_path is not None or preset is not None:
+        from gatmo.pipeline.config import load_stack_config
+
+        cfg = load_stack_config(config_path, preset=preset).amcl
+    else:
+        cfg = AmclConfig()
+    scans = load_scans(log, fmt, max_scans)
+    gt = ground_truth_of(scans, log, reference_path, stamp_offset_s=stamp_offset_s)
+    if gt is None:
+        raise DataError("no reference poses: the log has no ground truth; give --reference "
+                        "(e.g. gatmo map build LOG --poses-out POSES.tum)", file=log)
+    stamps = np.array([s.stamp_s for s in scans])
+    odom = np.array([s.odom_pose_xytheta for s in scans])
+    valid, ref = reference_at(stamps, gt.stamps_s, gt.poses_xytheta)
+    model = cfg.odom_model
+    d, a = cfg.update_min_d_m, cfg.update_min_a_rad
+    # the filter's update steps among the scans with a reference: a reference sparser than
+    # the updates gives steps as long as its spacing
+    all_steps = update_steps(odom, d, a)
+    have = np.flatnonzero(valid)
+    steps = have[update_steps(odom[have], d, a)] if len(have) else have
+    current = (cfg.alpha1, cfg.alpha2, cfg.alpha3, cfg.alpha4, cfg.alpha5)
+    half = len(steps) // 2
+    try:
+        fit = fit_odometry_noise(odom, ref, model=model, update_min_d_m=d, update_min_a_rad=a,
+                                 steps=steps)
+        first = fit_odometry_noise(odom, ref, model=model, update_min_d_m=d,
+                                   update_min_a_rad=a, steps=steps[: half + 1])
+    except ValueError as exc:
+        raise DataError(f"{exc} (the reference covers {valid.mean():.0%} of the scans; "
+                        f"{len(steps) - 1} odometry steps of {d:g} m / {a:g} rad)",
+                        file=reference_path or log) from None
+    terms = ("rot1", "trans", "rot2") if model.startswith("diff") else ("trans", "rot", "strafe")
+    n_alphas = 5 if model.startswith("omni") else 4
+    out = {
+        "log": str(log), "reference": gt.source, "scans": len(scans),
+        "reference_coverage": round(float(valid.mean()), 4), "model": model,
+        "update_min_d_m": d, "update_min_a_rad": a, "steps": fit.steps,
+        "rejected": fit.rejected, "alphas": [round(v, 6) for v in fit.alphas[:n_alphas]],
+        "current_alphas": [float(v) for v in current[:n_alphas]], "terms": list(terms),
+        "z_std_fitted": [round(v, 3) for v in fit.z_std],
+        "z_std_holdout": [round(v, 3) for v in step_z_std(
+            odom, ref, first.alphas, model=model, steps=steps[half:])],
+        "z_std_current": [round(v, 3) for v in step_z_std(
+            odom, ref, current, model=model, steps=steps)],
+        "trans_scale": round(fit.trans_scale, 5), "rot_scale": round(fit.rot_scale, 5),
+        "mean_error": [round(v, 6) for v in fit.mean_error],
+        "step_mean_m": round(fit.step_mean_m, 4), "step_mean_rad": round(fit.step_mean_rad, 4),
+        "warnings": [],
+    }
+    # the steps the filter takes on this odometry, all scans counted
+    filt = relative(odom[all_steps[:-1]], odom[all_steps[1:]]) if len(all_steps) > 1 else None
+    if filt is not None:
+        f_m, f_rad = float(np.hypot(filt[:, 0], filt[:, 1]).mean()), float(
+            np.abs(filt[:, 2]).mean())
+        out.update(filter_step_mean_m=round(f_m, 4), filter_step_mean_rad=round(f_rad, 4))
+        if fit.step_mean_m > COARSE_STEPS * f_m or fit.step_mean_rad > COARSE_STEPS * f_rad:
+            out["warnings"].append(
+                f"the reference is sparser than the filter's updates: the steps fitted average "
+                f"{fit.step_mean_m:.2f} m / {fit.step_mean_rad:.2f} rad, the filter's "
+                f"{f_m:.2f} m / {f_rad:.2f} rad, and alphas fitted to longer steps are not the "
+                "filter's (a reference at every scan: gatmo map build LOG --poses-out "
+                "POSES.tum)")
+    if out_path is not None:
+        if params_path is not None:
+            dialect = amcl_yaml_dialect(params_path)
+        else:  # Nav2 has only the corrected models
+            dialect = "nav2" if model.endswith("-corrected") else "ros1"
+        values = {"odom_model": model, "update_min_d_m": d, "update_min_a_rad": a}
+        values.update({f"alpha{i + 1}": out["alphas"][i] for i in range(n_alphas)})
+        header = (f"# AMCL odometry noise fitted by gatmo calibrate to {Path(log).name} against "
+                  f"{gt.source}\n# over {fit.steps} steps of {d:g} m / {a:g} rad "
+                  f"({fit.rejected} outliers trimmed)\n")
+        atomic_write_text(out_path, header + amcl_yaml_text(values, dialect))
+        out["out"] = str(out_path)
+    return out
+
+
+__all__ = ["COARSE_STEPS", "MAX_REFERENCE_DT_S", "MAX_REFERENCE_GAP_S",
+           "calibrate_odometry", "reference_at"]

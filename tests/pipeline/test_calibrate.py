@@ -1,0 +1,129 @@
+"""``gatmo calibrate``: AMCL's odometry alphas fitted to a log, written as AMCL YAML."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gatmo.cli import main
+from gatmo.datasets.carmen import CarmenLog, write_carmen
+from gatmo.datasets.tum import write_tum
+from gatmo.errors import ConfigError
+from gatmo.localization.calibration import update_steps
+from gatmo.localization.params import amcl_yaml_text, load_amcl_yaml
+from gatmo.pipeline.calibrate import calibrate_odometry, reference_at
+
+from ..helpers import make_scan, room_grid
+from ..localization.test_calibration import truth_from_model, wander
+
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+ALPHAS = (0.05, 0.01, 0.08, 0.03, 0.0)
+
+
+def write_log(path: Path, *, with_truth: bool = True, seed: int = 1) -> tuple[np.ndarray, ...]:
+    """A CARMEN log whose odometry is at AMCL's update steps (0.25 m / 0.2 rad) and whose true
+    poses (TRUEPOS) were drawn from the diff-corrected model with ALPHAS: returns (stamps, odom,
+    truth)."""
+    dense = wander(30000, seed=seed)
+    odom = dense[update_steps(dense, 0.25, 0.2)]
+    truth = truth_from_model(odom, "diff-corrected", ALPHAS, seed=seed + 1)
+    world = room_grid(6.0, 6.0)
+    stamps = np.arange(len(odom)) * 0.5
+    scans = [make_scan(world, (3.0, 3.0, 0.0), n_beams=5, odom_pose_xytheta=o, stamp_s=t)
+             for o, t in zip(odom, stamps, strict=True)]
+    for s, g in zip(scans, truth, strict=True):
+        s.gt_pose_xytheta = g if with_truth else None
+    write_carmen(path, scans)
+    return stamps, odom, truth
+
+
+def test_calibrate_recovers_the_alphas_of_a_log_and_writes_amcl_yaml_that_loads(tmp_path, capsys):
+    log = tmp_path / "run.log"
+    write_log(log)
+    out = tmp_path / "fitted.yaml"
+    assert main(["calibrate", str(log), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "alpha1" in text and "held out" in text
+    cfg = load_amcl_yaml(out)  # Nav2's layout: the file drops into a Nav2 params file
+    assert "ros__parameters" in out.read_text()
+    assert cfg.odom_model == "diff-corrected"
+    assert (cfg.update_min_d_m, cfg.update_min_a_rad) == (0.25, 0.2)
+    for got, want in zip((cfg.alpha1, cfg.alpha2, cfg.alpha3, cfg.alpha4), ALPHAS, strict=False):
+        assert got == pytest.approx(want, rel=0.25)
+    res = calibrate_odometry(log)
+    np.testing.assert_allclose(res["z_std_holdout"], 1.0, atol=0.15)  # fits what it never saw
+    # AMCL's defaults (0.2) predict errors far larger than these wheels make
+    assert max(res["z_std_current"]) < 0.8
+    assert res["warnings"] == []
+
+
+def test_calibrate_against_a_tum_reference_with_a_clock_offset(tmp_path):
+    log = tmp_path / "run.log"
+    stamps, _, truth = write_log(log, with_truth=False, seed=3)
+    write_tum(tmp_path / "ref.tum", stamps - 1000.0, truth)  # a clock 1000 s behind the log's
+    a = calibrate_odometry(log, reference_path=tmp_path / "ref.tum", stamp_offset_s=1000.0)
+    assert a["reference_coverage"] == 1.0
+    for got, want in zip(a["alphas"], ALPHAS, strict=False):
+        assert got == pytest.approx(want, rel=0.25)
+
+
+def test_calibrate_keeps_a_ros1_file_s_dialect_and_model(tmp_path):
+    log = tmp_path / "run.log"
+    write_log(log, seed=5)
+    params = tmp_path / "amcl.yaml"
+    params.write_text("odom_model_type: diff\nupdate_min_d: 0.25\nupdate_min_a: 0.2\n")
+    out = tmp_path / "fitted.yaml"
+    res = calibrate_odometry(log, params_path=params, out_path=out)
+    assert res["model"] == "diff"
+    assert "odom_alpha1" in out.read_text() and "ros__parameters" not in out.read_text()
+    cfg = load_amcl_yaml(out)
+    assert cfg.odom_model == "diff" and cfg.alpha1 == pytest.approx(res["alphas"][0])
+
+
+def test_calibrate_without_a_reference_says_how_to_make_one(tmp_path, capsys):
+    log = tmp_path / "run.log"
+    write_log(log, with_truth=False)
+    assert main(["calibrate", str(log)]) == 1
+    err = capsys.readouterr().err
+    assert "--reference" in err and "map build" in err
+
+
+def test_a_reference_covering_too_little_is_refused(tmp_path, capsys):
+    log = tmp_path / "run.log"
+    stamps, _, truth = write_log(log, with_truth=False)
+    write_tum(tmp_path / "ref.tum", stamps[:5], truth[:5])
+    assert main(["calibrate", str(log), "--reference", str(tmp_path / "ref.tum")]) == 1
+    assert "ref.tum" in capsys.readouterr().err
+
+
+def test_reference_counts_at_its_own_stamps_or_where_it_is_dense():
+    t_ref = np.array([0.0, 0.5, 1.0, 5.0, 9.0])
+    p_ref = np.c_[t_ref, np.zeros(5), np.zeros(5)]
+    q = np.array([0.25, 3.0, 5.01, 7.0, 9.0, 10.0])
+    valid, p = reference_at(q, t_ref, p_ref)
+    np.testing.assert_array_equal(valid, [True, False, True, False, True, False])
+    np.testing.assert_allclose(p[valid, 0], [0.25, 5.01, 9.0])
+
+
+def test_nav2_has_no_ros1_variance_as_std_model():
+    with pytest.raises(ConfigError, match="ROS 1 only"):
+        amcl_yaml_text({"odom_model": "diff"}, "nav2")
+
+
+@pytest.mark.skipif(not (DATA / "radish-corrected" / "intel-corrected.log.gz").exists(),
+                    reason="../shared/data (Intel bag and radish's corrected log) not found")
+def test_real_intel_odometry_against_radish_s_corrected_poses(tmp_path):
+    # radish's gmapping poses are keyframes (a pose every 1 m or so, 976052857.33753 s behind
+    # the bag's clock): the fit is at their spacing and says so
+    scans = list(CarmenLog(DATA / "radish-corrected" / "intel-corrected.log.gz",
+                           pose_is_reference=True, skip_bad=True))
+    write_tum(tmp_path / "ref.tum", np.array([s.stamp_s for s in scans]),
+              np.array([s.gt_pose_xytheta for s in scans]))
+    res = calibrate_odometry(DATA / "slam-benchmark" / "intel.sort.bag",
+                             reference_path=tmp_path / "ref.tum", stamp_offset_s=976052857.33753)
+    assert res["steps"] > 800
+    assert res["trans_scale"] == pytest.approx(1.0, abs=0.02)  # the wheels' scale is right
+    assert all(0.7 < z < 1.5 for z in res["z_std_holdout"])
+    assert any("sparser than the filter's updates" in w for w in res["warnings"])
