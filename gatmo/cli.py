@@ -572,6 +572,8 @@ def calibrate(
     The fit is made at the update thresholds and odometry model of the AMCL parameters given
     (else AMCL's defaults). z std is the RMS of the errors over the standard deviation the
     alphas predict: 1 when they predict the errors, above 1 when they are too small."""
+    import numpy as np
+
     from gatmo.pipeline.calibrate import calibrate_odometry
 
     res = calibrate_odometry(log, reference_path=reference, stamp_offset_s=stamp_offset,
@@ -593,7 +595,10 @@ def calibrate(
     _console().print(
         f"reference {res['reference']} at {res['reference_coverage']:.0%} of the scans; "
         f"{res['rejected']} outlier steps trimmed; travel scale {res['trans_scale']:.4f}, "
-        f"turn scale {res['rot_scale']:.4f} (reference over odometry)"
+        f"turn scale {res['rot_scale']:.4f} (reference over odometry); the reference's own "
+        f"noise taken out: {res['reference_noise_std'][0] * 100:.2f} / "
+        f"{res['reference_noise_std'][1] * 100:.2f} cm along / across, "
+        f"{np.degrees(res['reference_noise_std'][2]):.2f} deg"
         + (f"; written to {res['out']}" if "out" in res else ""), soft_wrap=True)
     _print_warnings(res["warnings"])
 

@@ -127,27 +127,87 @@ def _nanmean(values: np.ndarray) -> np.ndarray:
     return np.where(n > 0, total / np.maximum(n, 1), np.nan)
 
 
-def _variance(feats: np.ndarray, alphas: np.ndarray, model: str) -> np.ndarray:
+def reference_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray,
+                    valid: np.ndarray | None = None) -> np.ndarray:
+    """The reference's own white noise (3,): variances along and across the robot [m^2] and of
+    its heading [rad^2], from scan to scan.
+
+    Between consecutive scans the odometry is all but exact, so the reference's motion minus
+    the odometry's is the reference's noise at both ends: white noise of variance s^2 gives
+    consecutive differences a lag-one covariance of -s^2, which the odometry's own errors
+    (independent from step to step) and slow drift (positive) do not fake. A pose graph's
+    scans jitter by about a centimetre; at the filter's 0.1 m steps that is a tenth of a radian
+    of heading between two poses, which the alphas must not be made to carry. Where no pair of
+    consecutive scans has a reference (a SLAM's keyframes only), zeros."""
+    odom = np.asarray(odom_xytheta, dtype=float)
+    ref = np.asarray(ref_xytheta, dtype=float)
+    ok = np.ones(len(odom), bool) if valid is None else np.asarray(valid, bool)
+    pair = ok[:-1] & ok[1:]
+    if pair.sum() < 20:
+        return np.zeros(3)
+    r = np.full((len(odom) - 1, 3), np.nan)
+    i = np.flatnonzero(pair)
+    r[i] = relative(ref[i], ref[i + 1]) - relative(odom[i], odom[i + 1])
+    r[:, 2] = wrap_angle(r[:, 2])
+    med = np.nanmedian(r, axis=0)
+    mad = 1.4826 * np.nanmedian(np.abs(r - med), axis=0)
+    good = np.all(np.abs(r - med) <= 6.0 * np.maximum(mad, 1e-12), axis=1) & pair
+    both = good[:-1] & good[1:]
+    if both.sum() < 20:
+        return np.zeros(3)
+    a, b = r[:-1][both], r[1:][both]
+    cov = np.mean((a - a.mean(axis=0)) * (b - b.mean(axis=0)), axis=0)
+    return np.maximum(-cov, 0.0)
+
+
+def reference_variance(odom_prev: np.ndarray, odom_now: np.ndarray, model: str,
+                       ref_var) -> np.ndarray:
+    """What the reference's white noise ``ref_var`` (3,) (along, across [m^2], heading
+    [rad^2]; :func:`reference_noise`) adds to each step's error variance (K, 3), in the terms
+    of :func:`motion_errors`: the direction of travel between two noisy positions t apart is
+    off by 2 s_across^2 / t^2, a heading difference by 2 s_heading^2."""
+    vx, vy, vth = (float(v) for v in ref_var)
+    op, on = np.atleast_2d(odom_prev), np.atleast_2d(odom_now)
+    d = on[:, :2] - op[:, :2]
+    t = np.hypot(d[:, 0], d[:, 1])
+    out = np.zeros((len(op), 3))
+    if model.startswith("diff"):
+        moving = t >= _MIN_TRANS_M
+        direction = 2.0 * vy / np.maximum(t, _MIN_TRANS_M) ** 2
+        # rot1 = direction - theta0; rot2 = theta1 - direction (theta0 cancels), or a turn
+        out[:, 0] = np.where(moving, direction + vth, 0.0)
+        out[:, 1] = 2.0 * vx
+        out[:, 2] = np.where(moving, direction + vth, 2.0 * vth)
+        return out
+    out[:, 0] = 2.0 * vx
+    out[:, 1] = 2.0 * vth
+    out[:, 2] = 2.0 * vy + t**2 * vth  # the start's heading turns the across axis
+    return out
+
+
+def _variance(feats: np.ndarray, alphas: np.ndarray, model: str, extra=0.0) -> np.ndarray:
     v = feats @ alphas
     if not model.endswith("-corrected"):  # ROS 1: the weighted sum is the standard deviation
         v = v * v
-    return v + _VAR_FLOOR
+    return v + extra + _VAR_FLOOR
 
 
-def normalized_errors(errors: np.ndarray, features: np.ndarray, alphas, model: str) -> np.ndarray:
-    """Errors (K, 3) over the standard deviation the alphas predict: unit normals when the
-    alphas fit (NaN where the error is)."""
+def normalized_errors(errors: np.ndarray, features: np.ndarray, alphas, model: str,
+                      extra=0.0) -> np.ndarray:
+    """Errors (K, 3) over the standard deviation the alphas predict (plus ``extra`` (K, 3)
+    variance, the reference's: :func:`reference_variance`): unit normals when the alphas fit
+    (NaN where the error is)."""
     a = np.zeros(5)
     a[: len(alphas)] = np.asarray(alphas, dtype=float)
-    return errors / np.sqrt(_variance(features, a, model))
+    return errors / np.sqrt(_variance(features, a, model, extra))
 
 
 def _nll(alphas: np.ndarray, e2: np.ndarray, feats: np.ndarray, mask: np.ndarray,
-         model: str) -> tuple[float, np.ndarray]:
+         model: str, extra) -> tuple[float, np.ndarray]:
     """Negative log-likelihood (constant dropped) and its gradient in the alphas."""
     lin = feats @ alphas  # (K, 3)
     corrected = model.endswith("-corrected")
-    var = (lin if corrected else lin * lin) + _VAR_FLOOR
+    var = (lin if corrected else lin * lin) + extra + _VAR_FLOOR
     r = np.where(mask, 0.5 * (np.log(var) + e2 / var), 0.0)
     dv = np.where(mask, 0.5 * (1.0 / var - e2 / var**2), 0.0)  # d nll / d var
     if not corrected:
@@ -171,6 +231,8 @@ class OdometryNoiseFit:
         trans_scale: the reference's travel over the odometry's, over the used steps.
         rot_scale: the reference's summed |heading change| over the odometry's.
         step_mean_m, step_mean_rad: the used steps' mean odometry translation and |rotation|.
+        reference_std: (3,) the reference's noise taken out (along, across [m], heading
+            [rad]; :func:`reference_noise`).
     """
 
     model: str
@@ -185,10 +247,11 @@ class OdometryNoiseFit:
     rot_scale: float
     step_mean_m: float
     step_mean_rad: float
+    reference_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def _fit_alphas(errors: np.ndarray, feats: np.ndarray, model: str,
-                keep: np.ndarray) -> np.ndarray:
+                keep: np.ndarray, extra: np.ndarray) -> np.ndarray:
     from scipy.optimize import minimize, nnls
 
     omni = model.startswith("omni")
@@ -198,11 +261,14 @@ def _fit_alphas(errors: np.ndarray, feats: np.ndarray, model: str,
     e = np.where(mask, errors, 0.0)
     e2 = e * e
     # a start from least squares of the squared (or absolute) errors on the features
-    target = e2 if model.endswith("-corrected") else np.abs(e) * math.sqrt(math.pi / 2.0)
+    if model.endswith("-corrected"):
+        target = np.maximum(e2 - extra, 0.0)
+    else:
+        target = np.sqrt(np.maximum(e2 - extra, 0.0))
     rows = mask.reshape(-1)
     x0, _ = nnls(f.reshape(-1, n_par)[rows], target.reshape(-1)[rows])
     x0 = np.maximum(x0, 1e-6)
-    res = minimize(_nll, x0, args=(e2, f, mask, model), jac=True, method="L-BFGS-B",
+    res = minimize(_nll, x0, args=(e2, f, mask, model, extra), jac=True, method="L-BFGS-B",
                    bounds=[(0.0, None)] * n_par)
     a = np.zeros(5)
     a[:n_par] = res.x
@@ -212,7 +278,8 @@ def _fit_alphas(errors: np.ndarray, feats: np.ndarray, model: str,
 def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
                        model: str = "diff-corrected", update_min_d_m: float = 0.25,
                        update_min_a_rad: float = 0.2, valid: np.ndarray | None = None,
-                       steps: np.ndarray | None = None) -> OdometryNoiseFit:
+                       steps: np.ndarray | None = None,
+                       reference_var=(0.0, 0.0, 0.0)) -> OdometryNoiseFit:
     """Fit AMCL's alphas to odometry beside reference poses at the same stamps.
 
     Args:
@@ -225,6 +292,8 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
         valid: (N,) bool, poses with a reference (default all); a step is used when both its
             ends have one.
         steps: (K + 1,) update indices to use instead of cutting them here (:func:`update_steps`).
+        reference_var: (3,) the reference's own noise (:func:`reference_noise`), added to
+            each step's predicted variance so the alphas do not carry it.
 
     Raises:
         ValueError: shapes differ, or fewer than 10 steps to fit on.
@@ -241,16 +310,17 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
     if len(i0) < 10:
         raise ValueError(f"{len(i0)} steps with a reference at both ends: need at least 10")
     errors, feats = motion_errors(odom[i0], odom[i1], ref[i0], ref[i1], model)
+    extra = reference_variance(odom[i0], odom[i1], model, reference_var)
     keep = np.ones(len(i0), bool)
-    alphas = _fit_alphas(errors, feats, model, keep)
+    alphas = _fit_alphas(errors, feats, model, keep, extra)
     for _ in range(10):  # trim the outliers, refit, until the kept set stands
-        z = normalized_errors(errors, feats, alphas, model)
+        z = normalized_errors(errors, feats, alphas, model, extra)
         new = ~np.any(np.abs(np.nan_to_num(z)) > OUTLIER_SIGMA, axis=1)
         if np.array_equal(new, keep):
             break
         keep = new
-        alphas = _fit_alphas(errors, feats, model, keep)
-    z = normalized_errors(errors[keep], feats[keep], alphas, model)
+        alphas = _fit_alphas(errors, feats, model, keep, extra)
+    z = normalized_errors(errors[keep], feats[keep], alphas, model, extra[keep])
     d_o = relative(odom[i0[keep]], odom[i1[keep]])
     d_r = relative(ref[i0[keep]], ref[i1[keep]])
     t_o, t_r = np.hypot(d_o[:, 0], d_o[:, 1]).sum(), np.hypot(d_r[:, 0], d_r[:, 1]).sum()
@@ -263,14 +333,17 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
         trans_scale=float(t_r / t_o) if t_o > 0 else float("nan"),
         rot_scale=float(a_r / a_o) if a_o > 0 else float("nan"),
         step_mean_m=float(np.hypot(d_o[:, 0], d_o[:, 1]).mean()),
-        step_mean_rad=float(np.abs(d_o[:, 2]).mean()))
+        step_mean_rad=float(np.abs(d_o[:, 2]).mean()),
+        reference_std=tuple(float(v) for v in np.sqrt(np.asarray(reference_var, float))))
 
 
 def step_z_std(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, alphas, *, model: str,
-               steps: np.ndarray, valid: np.ndarray | None = None) -> tuple[float, float, float]:
-    """RMS of the normalized errors (3,) of the given alphas over the update ``steps``, outliers
-    beyond :data:`OUTLIER_SIGMA` of the alphas dropped: about 1 when they predict these steps'
-    errors, above when they are too small, below when too large."""
+               steps: np.ndarray, valid: np.ndarray | None = None,
+               reference_var=(0.0, 0.0, 0.0)) -> tuple[float, float, float]:
+    """RMS of the normalized errors (3,) of the given alphas (and the reference's noise
+    ``reference_var``) over the update ``steps``, outliers beyond :data:`OUTLIER_SIGMA` of the
+    alphas dropped: about 1 when they predict these steps' errors, above when they are too
+    small, below when too large."""
     odom = np.asarray(odom_xytheta, dtype=float)
     ref = np.asarray(ref_xytheta, dtype=float)
     ok = np.ones(len(odom), bool) if valid is None else np.asarray(valid, bool)
@@ -278,7 +351,8 @@ def step_z_std(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, alphas, *, mod
     use = ok[i0] & ok[i1]
     errors, feats = motion_errors(odom[i0[use]], odom[i1[use]], ref[i0[use]], ref[i1[use]],
                                   model)
-    z = normalized_errors(errors, feats, alphas, model)
+    extra = reference_variance(odom[i0[use]], odom[i1[use]], model, reference_var)
+    z = normalized_errors(errors, feats, alphas, model, extra)
     z = z[~np.any(np.abs(np.nan_to_num(z)) > OUTLIER_SIGMA, axis=1)]
     return tuple(float(v) for v in np.sqrt(_nanmean(z**2)))
 
@@ -316,4 +390,4 @@ def apply_linear_calibration(odom_xytheta: np.ndarray, K: np.ndarray) -> np.ndar
 
 __all__ = ["OUTLIER_SIGMA", "OdometryNoiseFit", "apply_linear_calibration",
            "fit_linear_calibration", "fit_odometry_noise", "motion_errors", "normalized_errors",
-           "step_z_std", "update_steps"]
+           "reference_noise", "reference_variance", "step_z_std", "update_steps"]

@@ -13,6 +13,7 @@ from gatmo.localization.calibration import (
     fit_linear_calibration,
     fit_odometry_noise,
     motion_errors,
+    reference_noise,
     update_steps,
 )
 from gatmo.localization.motion import sample_motion
@@ -164,3 +165,26 @@ def test_real_freiburg_odometry_calibration_holds_on_the_motions_it_was_not_fitt
 
     ref, raw, cal = chain(r[half:]), chain(u[half:]), chain(u[half:] @ K.T)
     assert np.hypot(*(cal[-1, :2] - ref[-1, :2])) < 0.3 * np.hypot(*(raw[-1, :2] - ref[-1, :2]))
+
+
+def test_the_reference_s_own_noise_is_measured_and_kept_out_of_the_alphas():
+    # a reference at every scan (2 cm apart) that jitters as a pose graph does: 1 cm across and
+    # along, 0.3 deg. Over the filter's 0.1 m steps that is 0.14 rad of direction, which a fit
+    # that ignores it puts into alpha2 (rotation per metre)
+    dense = wander(20000, seed=10)
+    truth = truth_from_model(dense, "diff-corrected", (0.05, 0.01, 0.08, 0.03, 0.0), seed=11)
+    rng = np.random.default_rng(12)
+    ref = truth + rng.normal(0.0, 1.0, truth.shape) * [0.01, 0.01, 0.005]
+    rv = reference_noise(dense, ref)
+    np.testing.assert_allclose(np.sqrt(rv), [0.01, 0.01, 0.005], rtol=0.1)
+    # the wheels' own noise from scan to scan is not mistaken for it: under 1 mm / 0.06 deg
+    assert np.all(np.sqrt(reference_noise(dense, truth)) < 0.001)
+    kw = {"update_min_d_m": 0.1, "update_min_a_rad": 0.1}
+    clean = fit_odometry_noise(dense, truth, **kw).alphas
+    naive = fit_odometry_noise(dense, ref, **kw).alphas
+    fixed = fit_odometry_noise(dense, ref, reference_var=rv, **kw)
+    assert naive[1] > 100 * clean[1]
+    assert abs(fixed.alphas[1] - clean[1]) < 0.1 * abs(naive[1] - clean[1])
+    for i in (0, 2):  # rotation and translation noise per unit: as with the exact reference
+        assert fixed.alphas[i] == pytest.approx(clean[i], rel=0.35)
+    np.testing.assert_allclose(fixed.reference_std, np.sqrt(rv))
