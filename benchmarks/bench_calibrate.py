@@ -84,12 +84,16 @@ def main(argv=None) -> int:
         models = {"amcl": real_stack_config(sharp_model=False).amcl,
                   "sharp": real_stack_config(sharp_model=True).amcl}
         entry: dict = {"scans": len(stamps), "fit_scans": half, "reference": str(ref)}
+        fits: dict = {}  # one fit per odometry model and update thresholds
         for mname, base in models.items():
-            fit = calibrate_odometry(log, reference_path=ref, stamp_offset_s=offset,
-                                     config=base, max_scans=half)
+            key = (base.odom_model, base.update_min_d_m, base.update_min_a_rad)
+            if key not in fits:
+                fits[key] = calibrate_odometry(log, reference_path=ref, stamp_offset_s=offset,
+                                               config=base, max_scans=half)
+            fit = fits[key]
             entry[f"fit_{mname}"] = {k: fit[k] for k in (
-                "alphas", "steps", "rejected", "z_std_current", "z_std_fitted", "trans_scale",
-                "rot_scale")}
+                "alphas", "steps", "rejected", "z_std_current", "z_std_fitted", "z_std_holdout",
+                "trans_scale", "rot_scale", "reference_noise_std")}
             fitted = base.model_copy(update={f"alpha{i + 1}": v
                                              for i, v in enumerate(fit["alphas"])})
             for aname, cfg in (("default", base), ("fitted", fitted)):

@@ -3,7 +3,7 @@ localizer vs the full stack, both with the same configuration and seed. People w
 and clutter comes and goes: GATMO must not make localization worse.
 
     python -m benchmarks.bench_real_compare [--logs intel,aces,mit-csail] [--max-scans N]
-                                            [--demo-config] [--split K]
+                                            [--demo-config] [--split K] [--alphas-from JSON]
                                             [--set KEY=VALUE ...] [--tag NAME]
 
 Maps and reference poses:
@@ -154,6 +154,9 @@ def main(argv=None) -> int:
     ap.add_argument("--demo-config", action="store_true",
                     help="the demo's likelihood_field_prob (sigma_hit 0.1 m) instead; results "
                     "under <log>-demo")
+    ap.add_argument("--alphas-from", type=Path, default=None,
+                    help="bench_calibrate's JSON (e.g. bench-out/calibrate_66b.json): both sides "
+                    "run the odometry alphas fitted to each log there")
     add_override_args(ap)
     args = ap.parse_args(argv or [])
     if not (DATA / "slam-benchmark").exists():
@@ -174,6 +177,10 @@ def main(argv=None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         map_yaml, gt, pose0 = _prepare(name, out)
         cfg = with_overrides(real_log_config(demo_model=args.demo_config), args.set)
+        if args.alphas_from is not None:
+            fitted = json.loads(args.alphas_from.read_text())[name]["fit_amcl"]["alphas"]
+            for i, v in enumerate(fitted):
+                setattr(cfg.amcl, f"alpha{i + 1}", v)
         key = (f"{name}-demo" if args.demo_config else name) + (
             f"-split{args.split}" if args.split > 1 else "") + args.tag
         logs, gts = [DATA / "slam-benchmark" / f"{name}.sort.bag"], [gt]

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gatmo.cli import main
 from gatmo.datasets.carmen import CarmenLog, write_carmen
@@ -127,3 +129,43 @@ def test_real_intel_odometry_against_radish_s_corrected_poses(tmp_path):
     assert res["trans_scale"] == pytest.approx(1.0, abs=0.02)  # the wheels' scale is right
     assert all(0.7 < z < 1.5 for z in res["z_std_holdout"])
     assert any("sparser than the filter's updates" in w for w in res["warnings"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(dialect=st.sampled_from(["nav2", "ros1"]),
+       model=st.sampled_from(["diff-corrected", "omni-corrected", "diff", "omni"]),
+       alphas=st.lists(st.floats(0.0, 50.0, allow_nan=False), min_size=5, max_size=5),
+       d=st.floats(0.0, 2.0, allow_nan=False), a=st.floats(0.0, 3.0, allow_nan=False))
+def test_written_amcl_yaml_reads_back_to_the_same_values(tmp_path_factory, dialect, model,
+                                                         alphas, d, a):
+    values = {"odom_model": model, "update_min_d_m": d, "update_min_a_rad": a}
+    values.update({f"alpha{i + 1}": v for i, v in enumerate(alphas)})
+    if dialect == "nav2" and not model.endswith("-corrected"):
+        with pytest.raises(ConfigError):
+            amcl_yaml_text(values, dialect)
+        return
+    path = tmp_path_factory.mktemp("y") / "amcl.yaml"
+    path.write_text(amcl_yaml_text(values, dialect))
+    cfg = load_amcl_yaml(path)
+    assert {k: getattr(cfg, k) for k in values} == values
+
+
+@pytest.mark.skipif(not (DATA / "slam-benchmark" / "mit-csail.sort.bag").exists(),
+                    reason="../shared/data (the MIT CSAIL bag) not found")
+def test_real_mit_csail_odometry_against_its_own_pose_graph(tmp_path):
+    # the flow a user without ground truth has: map build's poses as the reference
+    from gatmo.pipeline.mapping import build_map
+
+    bag = DATA / "slam-benchmark" / "mit-csail.sort.bag"
+    build_map(bag, tmp_path / "m.yaml", poses_out=tmp_path / "p.tum", max_scans=600)
+    res = calibrate_odometry(bag, reference_path=tmp_path / "p.tum", preset="real",
+                             max_scans=600)
+    assert res["reference_coverage"] == 1.0 and res["warnings"] == []
+    assert res["steps"] > 400
+    # AMCL's 0.2 make the filter expect three times the translation error these wheels make
+    assert res["z_std_current"][1] < 0.5
+    np.testing.assert_allclose(res["z_std_fitted"], 1.0, atol=0.1)
+    assert max(res["z_std_holdout"]) < 1.3
+    assert res["rot_scale"] > 1.03  # this robot's odometry under-reports its turns
+    # the pose graph's jitter, along the corridors (ICP's weak direction): under 2 cm
+    assert 0.0 < res["reference_noise_std"][0] < 0.02
