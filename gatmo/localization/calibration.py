@@ -185,6 +185,45 @@ def reference_variance(odom_prev: np.ndarray, odom_now: np.ndarray, model: str,
     return out
 
 
+#: :func:`odometry_scales` compares the two over stretches of this much reference travel [m] ...
+SCALE_STRETCH_M = 1.0
+#: ... or of this much reference turn [rad]
+SCALE_STRETCH_RAD = 0.5
+
+
+def odometry_scales(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray,
+                    valid: np.ndarray | None = None) -> tuple[float, float]:
+    """(travel scale, turn scale): the reference's travel over the odometry's, and 1 / k of
+    the odometry's heading changes regressed on the reference's (``dtheta_odom = k
+    dtheta_ref``; above 1: the odometry under-reports turns); NaN where there is nothing to
+    compare.
+
+    Over stretches cut where the *reference* has travelled :data:`SCALE_STRETCH_M` or turned
+    :data:`SCALE_STRETCH_RAD`. Not over the filter's steps: those are cut where the odometry
+    crosses a threshold, which biases any ratio taken over them; not from scan to scan, where
+    a reference's jitter adds travel and dilutes turns; and not a ratio of summed |turns|,
+    which reads straight driving's heading noise as turning."""
+    odom = np.asarray(odom_xytheta, dtype=float)
+    ref = np.asarray(ref_xytheta, dtype=float)
+    ok = np.ones(len(odom), bool) if valid is None else np.asarray(valid, bool)
+    have = np.flatnonzero(ok)
+    cuts = [have[0]] if len(have) else []
+    for j in have[1:]:
+        d = ref[j] - ref[cuts[-1]]
+        if math.hypot(d[0], d[1]) >= SCALE_STRETCH_M or abs(wrap_angle(d[2])) >= SCALE_STRETCH_RAD:
+            cuts.append(j)
+    if len(cuts) < 3:
+        return float("nan"), float("nan")
+    c = np.asarray(cuts)
+    d_o, d_r = relative(odom[c[:-1]], odom[c[1:]]), relative(ref[c[:-1]], ref[c[1:]])
+    t_o, t_r = np.hypot(d_o[:, 0], d_o[:, 1]).sum(), np.hypot(d_r[:, 0], d_r[:, 1]).sum()
+    a_o, a_r = wrap_angle(d_o[:, 2]), wrap_angle(d_r[:, 2])
+    xx = float(np.dot(a_r, a_r))
+    k = float(np.dot(a_r, a_o)) / xx if xx > 0 else float("nan")
+    return (float(t_r / t_o) if t_o > 0 else float("nan"),
+            1.0 / k if k > 0 else float("nan"))
+
+
 def _variance(feats: np.ndarray, alphas: np.ndarray, model: str, extra=0.0) -> np.ndarray:
     v = feats @ alphas
     if not model.endswith("-corrected"):  # ROS 1: the weighted sum is the standard deviation
@@ -228,8 +267,9 @@ class OdometryNoiseFit:
         z_std: (3,) standard deviation of the used steps' normalized errors at the fit (1 when
             the model's shape fits; per component: rot1 / trans / rot2 or trans / rot / strafe).
         mean_error: (3,) the used steps' mean error (a bias the alphas absorb).
-        trans_scale: the reference's travel over the odometry's, over the used steps.
-        rot_scale: the reference's summed |heading change| over the odometry's.
+        trans_scale, rot_scale: the reference's travel over the odometry's, and its turns
+            over the odometry's (above 1: the odometry under-reports them;
+            :func:`odometry_scales`).
         step_mean_m, step_mean_rad: the used steps' mean odometry translation and |rotation|.
         reference_std: (3,) the reference's noise taken out (along, across [m], heading
             [rad]; :func:`reference_noise`).
@@ -322,16 +362,13 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
         alphas = _fit_alphas(errors, feats, model, keep, extra)
     z = normalized_errors(errors[keep], feats[keep], alphas, model, extra[keep])
     d_o = relative(odom[i0[keep]], odom[i1[keep]])
-    d_r = relative(ref[i0[keep]], ref[i1[keep]])
-    t_o, t_r = np.hypot(d_o[:, 0], d_o[:, 1]).sum(), np.hypot(d_r[:, 0], d_r[:, 1]).sum()
-    a_o, a_r = np.abs(d_o[:, 2]).sum(), np.abs(d_r[:, 2]).sum()
+    trans_scale, rot_scale = odometry_scales(odom, ref, ok)
     return OdometryNoiseFit(
         model=model, alphas=tuple(float(a) for a in alphas), update_min_d_m=update_min_d_m,
         update_min_a_rad=update_min_a_rad, steps=int(keep.sum()), rejected=int((~keep).sum()),
         z_std=tuple(float(v) for v in np.sqrt(_nanmean(z**2))),
         mean_error=tuple(float(v) for v in _nanmean(errors[keep])),
-        trans_scale=float(t_r / t_o) if t_o > 0 else float("nan"),
-        rot_scale=float(a_r / a_o) if a_o > 0 else float("nan"),
+        trans_scale=trans_scale, rot_scale=rot_scale,
         step_mean_m=float(np.hypot(d_o[:, 0], d_o[:, 1]).mean()),
         step_mean_rad=float(np.abs(d_o[:, 2]).mean()),
         reference_std=tuple(float(v) for v in np.sqrt(np.asarray(reference_var, float))))
@@ -388,6 +425,7 @@ def apply_linear_calibration(odom_xytheta: np.ndarray, K: np.ndarray) -> np.ndar
     return out
 
 
-__all__ = ["OUTLIER_SIGMA", "OdometryNoiseFit", "apply_linear_calibration",
-           "fit_linear_calibration", "fit_odometry_noise", "motion_errors", "normalized_errors",
-           "reference_noise", "reference_variance", "step_z_std", "update_steps"]
+__all__ = ["OUTLIER_SIGMA", "SCALE_STRETCH_M", "SCALE_STRETCH_RAD", "OdometryNoiseFit",
+           "apply_linear_calibration", "fit_linear_calibration", "fit_odometry_noise",
+           "motion_errors", "normalized_errors", "odometry_scales", "reference_noise",
+           "reference_variance", "step_z_std", "update_steps"]

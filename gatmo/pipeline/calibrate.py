@@ -132,9 +132,9 @@ def calibrate_odometry(
     rv = reference_noise(odom, ref, valid)
     try:
         fit = fit_odometry_noise(odom, ref, model=model, update_min_d_m=d, update_min_a_rad=a,
-                                 steps=steps, reference_var=rv)
+                                 steps=steps, valid=valid, reference_var=rv)
         first = fit_odometry_noise(odom, ref, model=model, update_min_d_m=d,
-                                   update_min_a_rad=a, steps=steps[: half + 1],
+                                   update_min_a_rad=a, steps=steps[: half + 1], valid=valid,
                                    reference_var=rv)
     except ValueError as exc:
         raise DataError(f"{exc} (the reference covers {valid.mean():.0%} of the scans; "
