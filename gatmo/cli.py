@@ -563,6 +563,9 @@ def calibrate(
     out: Annotated[Path | None, typer.Option(
         "--out", help="Write the fitted alphas as AMCL YAML (Nav2's layout, or ROS 1's when "
         "--params is a ROS 1 file).")] = None,
+    min_alpha: Annotated[float, typer.Option(
+        "--min-alpha", min=0.0, help="Least alpha written to --out (a filter given no noise "
+        "of a kind cannot spread its particles that way).")] = 0.0,
     fmt: FormatOpt = None,
     max_scans: Annotated[int | None, typer.Option("--max-scans", help="At most this many "
                                                   "scans.")] = None,
@@ -578,7 +581,7 @@ def calibrate(
 
     res = calibrate_odometry(log, reference_path=reference, stamp_offset_s=stamp_offset,
                              params_path=params, config_path=config, preset=preset, fmt=fmt,
-                             max_scans=max_scans, out_path=out)
+                             max_scans=max_scans, out_path=out, min_alpha=min_alpha)
     from rich.table import Table
 
     title = f"calibrate {log.name}: {res['model']}, {res['steps']} steps of " \

@@ -23,8 +23,10 @@ from gatmo.geometry import relative
 MAX_REFERENCE_DT_S = 0.05
 #: ... or when the reference's samples either side are at most this far apart (interpolated)
 MAX_REFERENCE_GAP_S = 1.0
-#: steps longer on average than this many times the update thresholds: the fit is for them
+#: steps longer on average than this many times the filter's: the fit is for them
 COARSE_STEPS = 1.5
+#: a fitted alpha below this is reported as none of that noise
+NEGLIGIBLE_ALPHA = 1e-4
 
 
 def reference_at(stamps_s: np.ndarray, ref_stamps_s: np.ndarray, ref_xytheta: np.ndarray,
@@ -62,6 +64,7 @@ def calibrate_odometry(
     max_scans: int | None = None,
     out_path: str | Path | None = None,
     config=None,
+    min_alpha: float = 0.0,
 ) -> dict:
     """Fit AMCL's odometry alphas to ``log``'s odometry against the reference.
 
@@ -75,6 +78,8 @@ def calibrate_odometry(
         out_path: write the fitted alphas, model and thresholds as AMCL YAML here (Nav2's
             layout, or ROS 1's when ``params_path`` is a ROS 1 file).
         config: an :class:`AmclConfig` instead of the files.
+        min_alpha: the least alpha written to ``out_path`` (the fit may find none of a kind of
+            noise, and a filter given none cannot spread its particles that way).
 
     Returns:
         a flat dict: ``model``, ``update_min_d_m``, ``update_min_a_rad``, ``steps``,
@@ -172,20 +177,28 @@ def calibrate_odometry(
                 f"{f_m:.2f} m / {f_rad:.2f} rad, and alphas fitted to longer steps are not the "
                 "filter's (a reference at every scan: gatmo map build LOG --poses-out "
                 "POSES.tum)")
+    zero = [f"alpha{i + 1}" for i, v in enumerate(out["alphas"]) if v < NEGLIGIBLE_ALPHA]
+    if zero:
+        out["warnings"].append(
+            f"{', '.join(zero)} fitted to about 0: these steps show no such noise, and a filter "
+            "given none cannot spread its particles that way; --min-alpha floors what is "
+            "written")
     if out_path is not None:
         if params_path is not None:
             dialect = amcl_yaml_dialect(params_path)
         else:  # Nav2 has only the corrected models
             dialect = "nav2" if model.endswith("-corrected") else "ros1"
         values = {"odom_model": model, "update_min_d_m": d, "update_min_a_rad": a}
-        values.update({f"alpha{i + 1}": out["alphas"][i] for i in range(n_alphas)})
+        values.update({f"alpha{i + 1}": max(out["alphas"][i], min_alpha)
+                       for i in range(n_alphas)})
         header = (f"# AMCL odometry noise fitted by gatmo calibrate to {Path(log).name} against "
                   f"{gt.source}\n# over {fit.steps} steps of {d:g} m / {a:g} rad "
-                  f"({fit.rejected} outliers trimmed)\n")
+                  f"({fit.rejected} outliers trimmed)"
+                  + (f"; alphas floored at {min_alpha:g}" if min_alpha > 0 else "") + "\n")
         atomic_write_text(out_path, header + amcl_yaml_text(values, dialect))
         out["out"] = str(out_path)
     return out
 
 
-__all__ = ["COARSE_STEPS", "MAX_REFERENCE_DT_S", "MAX_REFERENCE_GAP_S",
+__all__ = ["COARSE_STEPS", "MAX_REFERENCE_DT_S", "MAX_REFERENCE_GAP_S", "NEGLIGIBLE_ALPHA",
            "calibrate_odometry", "reference_at"]

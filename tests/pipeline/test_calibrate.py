@@ -169,3 +169,19 @@ def test_real_mit_csail_odometry_against_its_own_pose_graph(tmp_path):
     assert res["trans_scale"] == pytest.approx(1.0, abs=0.03)
     # the pose graph's jitter, along the corridors (ICP's weak direction): under 2 cm
     assert 0.0 < res["reference_noise_std"][0] < 0.02
+
+
+@pytest.mark.skipif(not (DATA / "uob-meeting" / "simpath2.bag").exists(),
+                    reason="../shared/data (the UoB Stage bag) not found")
+def test_real_noise_free_stage_odometry_is_said_to_have_no_noise_and_floored(tmp_path, capsys):
+    # Stage's odometry is noise-free (the data's README): its ground truth, in Stage's frame,
+    # is a fine reference (only relative motions count), and some alphas come out at 0
+    bag = DATA / "uob-meeting" / "simpath2.bag"
+    out = tmp_path / "fitted.yaml"
+    assert main(["calibrate", str(bag), "--out", str(out), "--min-alpha", "0.005"]) == 0
+    assert "fitted to about 0" in capsys.readouterr().out
+    cfg = load_amcl_yaml(out)
+    alphas = (cfg.alpha1, cfg.alpha2, cfg.alpha3, cfg.alpha4)
+    assert min(alphas) == 0.005 and max(alphas) < 0.05  # AMCL's 0.2 are far too much here
+    res = calibrate_odometry(bag)
+    assert max(res["z_std_current"]) < 0.3
