@@ -551,10 +551,11 @@ def eval_trajectory(
 
 @app.command()
 def calibrate(
-    log: Annotated[Path, typer.Argument(help="Log or bag with scans and odometry.")],
-    reference: Annotated[Path | None, typer.Option(
-        "--reference", help="Reference poses of the robot (TUM, any fixed frame), e.g. from "
-        "gatmo map build --poses-out; else the log's own ground truth.")] = None,
+    logs: Annotated[list[Path], typer.Argument(
+        help="Logs or bags with scans and odometry, of one robot (pooled).")],
+    reference: Annotated[list[Path] | None, typer.Option(
+        "--reference", help="Reference poses of the robot (TUM, any fixed frame), one per log, "
+        "e.g. from gatmo map build --poses-out; else the logs' own ground truth.")] = None,
     stamp_offset: Annotated[float, typer.Option(
         "--stamp-offset", help="Seconds added to the reference's stamps.")] = 0.0,
     params: ParamsOpt = None,
@@ -579,12 +580,13 @@ def calibrate(
 
     from gatmo.pipeline.calibrate import calibrate_odometry
 
-    res = calibrate_odometry(log, reference_path=reference, stamp_offset_s=stamp_offset,
+    res = calibrate_odometry(logs, reference_path=reference, stamp_offset_s=stamp_offset,
                              params_path=params, config_path=config, preset=preset, fmt=fmt,
                              max_scans=max_scans, out_path=out, min_alpha=min_alpha)
     from rich.table import Table
 
-    title = f"calibrate {log.name}: {res['model']}, {res['steps']} steps of " \
+    names = ", ".join(x.name for x in logs)
+    title = f"calibrate {names}: {res['model']}, {res['steps']} steps of " \
             f"{res['update_min_d_m']:g} m / {res['update_min_a_rad']:g} rad"
     table = Table(title=title, min_width=len(title))
     for col in ("", "current", "fitted", "fitted, held out"):

@@ -128,7 +128,8 @@ def _nanmean(values: np.ndarray) -> np.ndarray:
 
 
 def reference_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray,
-                    valid: np.ndarray | None = None) -> np.ndarray:
+                    valid: np.ndarray | None = None,
+                    sequence: np.ndarray | None = None) -> np.ndarray:
     """The reference's own white noise (3,): variances along and across the robot [m^2] and of
     its heading [rad^2], from scan to scan.
 
@@ -138,11 +139,12 @@ def reference_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray,
     (independent from step to step) and slow drift (positive) do not fake. A pose graph's
     scans jitter by about a centimetre; at the filter's 0.1 m steps that is a tenth of a radian
     of heading between two poses, which the alphas must not be made to carry. Where no pair of
-    consecutive scans has a reference (a SLAM's keyframes only), zeros."""
+    consecutive scans has a reference (a SLAM's keyframes only), zeros. ``sequence`` (N,):
+    which log each pose is from, for several logs laid end to end (default one)."""
     odom = np.asarray(odom_xytheta, dtype=float)
     ref = np.asarray(ref_xytheta, dtype=float)
     ok = np.ones(len(odom), bool) if valid is None else np.asarray(valid, bool)
-    pair = ok[:-1] & ok[1:]
+    pair = ok[:-1] & ok[1:] & _same(sequence, len(odom))
     if pair.sum() < 20:
         return np.zeros(3)
     r = np.full((len(odom) - 1, 3), np.nan)
@@ -191,8 +193,17 @@ SCALE_STRETCH_M = 1.0
 SCALE_STRETCH_RAD = 0.5
 
 
+def _same(sequence: np.ndarray | None, n: int) -> np.ndarray:
+    """(n - 1,) whether poses i and i + 1 are from the same log."""
+    if sequence is None:
+        return np.ones(max(n - 1, 0), bool)
+    seq = np.asarray(sequence)
+    return seq[:-1] == seq[1:]
+
+
 def odometry_scales(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray,
-                    valid: np.ndarray | None = None) -> tuple[float, float]:
+                    valid: np.ndarray | None = None,
+                    sequence: np.ndarray | None = None) -> tuple[float, float]:
     """(travel scale, turn scale): the reference's travel over the odometry's, and 1 / k of
     the odometry's heading changes regressed on the reference's (``dtheta_odom = k
     dtheta_ref``; above 1: the odometry under-reports turns); NaN where there is nothing to
@@ -202,20 +213,26 @@ def odometry_scales(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray,
     :data:`SCALE_STRETCH_RAD`. Not over the filter's steps: those are cut where the odometry
     crosses a threshold, which biases any ratio taken over them; not from scan to scan, where
     a reference's jitter adds travel and dilutes turns; and not a ratio of summed |turns|,
-    which reads straight driving's heading noise as turning."""
+    which reads straight driving's heading noise as turning. ``sequence``: as
+    :func:`reference_noise` (no stretch spans two logs)."""
     odom = np.asarray(odom_xytheta, dtype=float)
     ref = np.asarray(ref_xytheta, dtype=float)
     ok = np.ones(len(odom), bool) if valid is None else np.asarray(valid, bool)
-    have = np.flatnonzero(ok)
-    cuts = [have[0]] if len(have) else []
-    for j in have[1:]:
-        d = ref[j] - ref[cuts[-1]]
+    seq = np.zeros(len(odom), np.int64) if sequence is None else np.asarray(sequence)
+    stretches = []
+    start = None
+    for j in np.flatnonzero(ok):
+        if start is None or seq[j] != seq[start]:
+            start = j
+            continue
+        d = ref[j] - ref[start]
         if math.hypot(d[0], d[1]) >= SCALE_STRETCH_M or abs(wrap_angle(d[2])) >= SCALE_STRETCH_RAD:
-            cuts.append(j)
-    if len(cuts) < 3:
+            stretches.append((start, j))
+            start = j
+    if len(stretches) < 2:
         return float("nan"), float("nan")
-    c = np.asarray(cuts)
-    d_o, d_r = relative(odom[c[:-1]], odom[c[1:]]), relative(ref[c[:-1]], ref[c[1:]])
+    c0, c1 = np.asarray(stretches).T
+    d_o, d_r = relative(odom[c0], odom[c1]), relative(ref[c0], ref[c1])
     t_o, t_r = np.hypot(d_o[:, 0], d_o[:, 1]).sum(), np.hypot(d_r[:, 0], d_r[:, 1]).sum()
     a_o, a_r = wrap_angle(d_o[:, 2]), wrap_angle(d_r[:, 2])
     xx = float(np.dot(a_r, a_r))
@@ -319,6 +336,8 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
                        model: str = "diff-corrected", update_min_d_m: float = 0.25,
                        update_min_a_rad: float = 0.2, valid: np.ndarray | None = None,
                        steps: np.ndarray | None = None,
+                       pairs: np.ndarray | None = None,
+                       sequence: np.ndarray | None = None,
                        reference_var=(0.0, 0.0, 0.0)) -> OdometryNoiseFit:
     """Fit AMCL's alphas to odometry beside reference poses at the same stamps.
 
@@ -332,6 +351,8 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
         valid: (N,) bool, poses with a reference (default all); a step is used when both its
             ends have one.
         steps: (K + 1,) update indices to use instead of cutting them here (:func:`update_steps`).
+        pairs: (K, 2) the steps' (start, end) indices instead: several logs laid end to end.
+        sequence: (N,) which log each pose is from, with ``pairs`` (for the scales).
         reference_var: (3,) the reference's own noise (:func:`reference_noise`), added to
             each step's predicted variance so the alphas do not carry it.
 
@@ -343,8 +364,7 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
     if odom.shape != ref.shape or odom.ndim != 2 or odom.shape[1] != 3:
         raise ValueError(f"odometry {odom.shape} and reference {ref.shape} must both be (N, 3)")
     ok = np.ones(len(odom), bool) if valid is None else np.asarray(valid, bool)
-    idx = update_steps(odom, update_min_d_m, update_min_a_rad) if steps is None else steps
-    i0, i1 = idx[:-1], idx[1:]
+    i0, i1 = _step_pairs(odom, update_min_d_m, update_min_a_rad, steps, pairs)
     use = ok[i0] & ok[i1]
     i0, i1 = i0[use], i1[use]
     if len(i0) < 10:
@@ -362,7 +382,7 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
         alphas = _fit_alphas(errors, feats, model, keep, extra)
     z = normalized_errors(errors[keep], feats[keep], alphas, model, extra[keep])
     d_o = relative(odom[i0[keep]], odom[i1[keep]])
-    trans_scale, rot_scale = odometry_scales(odom, ref, ok)
+    trans_scale, rot_scale = odometry_scales(odom, ref, ok, sequence)
     return OdometryNoiseFit(
         model=model, alphas=tuple(float(a) for a in alphas), update_min_d_m=update_min_d_m,
         update_min_a_rad=update_min_a_rad, steps=int(keep.sum()), rejected=int((~keep).sum()),
@@ -374,8 +394,20 @@ def fit_odometry_noise(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, *,
         reference_std=tuple(float(v) for v in np.sqrt(np.asarray(reference_var, float))))
 
 
+def _step_pairs(odom: np.ndarray, update_min_d_m: float, update_min_a_rad: float,
+                steps: np.ndarray | None, pairs: np.ndarray | None):
+    """(i0, i1): the steps' start and end indices, from ``pairs`` (K, 2), else ``steps``
+    (K + 1,), else cut at the thresholds."""
+    if pairs is not None:
+        p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        return p[:, 0], p[:, 1]
+    idx = update_steps(odom, update_min_d_m, update_min_a_rad) if steps is None else steps
+    return np.asarray(idx[:-1]), np.asarray(idx[1:])
+
+
 def step_z_std(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, alphas, *, model: str,
-               steps: np.ndarray, valid: np.ndarray | None = None,
+               steps: np.ndarray | None = None, pairs: np.ndarray | None = None,
+               valid: np.ndarray | None = None,
                reference_var=(0.0, 0.0, 0.0)) -> tuple[float, float, float]:
     """RMS of the normalized errors (3,) of the given alphas (and the reference's noise
     ``reference_var``) over the update ``steps``, outliers beyond :data:`OUTLIER_SIGMA` of the
@@ -384,7 +416,9 @@ def step_z_std(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray, alphas, *, mod
     odom = np.asarray(odom_xytheta, dtype=float)
     ref = np.asarray(ref_xytheta, dtype=float)
     ok = np.ones(len(odom), bool) if valid is None else np.asarray(valid, bool)
-    i0, i1 = steps[:-1], steps[1:]
+    if steps is None and pairs is None:
+        raise ValueError("step_z_std needs steps or pairs")
+    i0, i1 = _step_pairs(odom, 0.0, 0.0, steps, pairs)
     use = ok[i0] & ok[i1]
     errors, feats = motion_errors(odom[i0[use]], odom[i1[use]], ref[i0[use]], ref[i1[use]],
                                   model)

@@ -12,11 +12,12 @@ a radian of direction over a 0.1 m step) and taken out, so the alphas do not car
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from gatmo.errors import DataError
+from gatmo.errors import DataError, GatmoError
 from gatmo.geometry import relative
 
 #: a scan has a reference when one of the reference's samples is this close in time
@@ -53,9 +54,9 @@ def reference_at(stamps_s: np.ndarray, ref_stamps_s: np.ndarray, ref_xytheta: np
 
 
 def calibrate_odometry(
-    log: str | Path,
+    log: str | Path | Sequence[str | Path],
     *,
-    reference_path: str | Path | None = None,
+    reference_path: str | Path | Sequence[str | Path] | None = None,
     stamp_offset_s: float = 0.0,
     params_path: str | Path | None = None,
     config_path: str | Path | None = None,
@@ -69,8 +70,10 @@ def calibrate_odometry(
     """Fit AMCL's odometry alphas to ``log``'s odometry against the reference.
 
     Args:
-        log: a log or bag with scans and odometry (the odometry at the scans' stamps is used).
-        reference_path: TUM reference poses of the robot base; else the log's own ground truth.
+        log: a log or bag with scans and odometry (the odometry at the scans' stamps is used),
+            or several of one robot, pooled (no step spans two).
+        reference_path: TUM reference poses of the robot base, one per log; else the logs'
+            own ground truth.
         stamp_offset_s: added to the reference's stamps (radish's ``intel-corrected`` runs
             976052857.33753 s behind the Intel bag).
         params_path / config_path / preset: the AMCL configuration whose odometry model and
@@ -85,7 +88,8 @@ def calibrate_odometry(
         a flat dict: ``model``, ``update_min_d_m``, ``update_min_a_rad``, ``steps``,
         ``rejected``, ``alphas`` (fitted), ``current_alphas``, ``z_std_*`` (RMS of the
         normalized errors per component: 1 when the alphas predict the errors; ``fitted``
-        in-sample, ``holdout`` fitted on the first half and scored on the second,
+        in-sample, ``holdout`` fitted on the first half of the steps (in the order of the
+        logs) and scored on the second,
         ``current`` the configuration's alphas), ``trans_scale``, ``rot_scale`` and
         ``mean_error`` (biases the alphas absorb), ``reference_noise_std`` (the reference's own
         scan-to-scan noise, along / across the robot [m] and heading [rad], taken out of the
@@ -116,48 +120,69 @@ def calibrate_odometry(
         cfg = load_stack_config(config_path, preset=preset).amcl
     else:
         cfg = AmclConfig()
-    scans = load_scans(log, fmt, max_scans)
-    gt = ground_truth_of(scans, log, reference_path, stamp_offset_s=stamp_offset_s)
-    if gt is None:
-        raise DataError("no reference poses: the log has no ground truth; give --reference "
-                        "(e.g. gatmo map build LOG --poses-out POSES.tum)", file=log)
-    stamps = np.array([s.stamp_s for s in scans])
-    odom = np.array([s.odom_pose_xytheta for s in scans])
-    valid, ref = reference_at(stamps, gt.stamps_s, gt.poses_xytheta)
+    logs = [log] if isinstance(log, str | Path) else list(log)
+    if reference_path is None or isinstance(reference_path, str | Path):
+        refs = [reference_path] * len(logs) if reference_path is None or len(logs) == 1 else None
+    else:
+        refs = list(reference_path)
+    if not logs or refs is None or len(refs) != len(logs):
+        raise GatmoError(f"{len(logs)} logs and {1 if refs is None else len(refs)} references: "
+                         "give one --reference per log, or none")
     model = cfg.odom_model
     d, a = cfg.update_min_d_m, cfg.update_min_a_rad
-    # the filter's update steps among the scans with a reference: a reference sparser than
-    # the updates gives steps as long as its spacing
-    all_steps = update_steps(odom, d, a)
-    have = np.flatnonzero(valid)
-    steps = have[update_steps(odom[have], d, a)] if len(have) else have
+    odoms, poses, valids, pairs, filter_pairs, sources = [], [], [], [], [], []
+    n0 = 0
+    for lg, rp in zip(logs, refs, strict=True):
+        scans = load_scans(lg, fmt, max_scans)
+        gt = ground_truth_of(scans, lg, rp, stamp_offset_s=stamp_offset_s)
+        if gt is None:
+            raise DataError("no reference poses: the log has no ground truth; give --reference "
+                            "(e.g. gatmo map build LOG --poses-out POSES.tum)", file=lg)
+        stamps = np.array([s.stamp_s for s in scans])
+        odom = np.array([s.odom_pose_xytheta for s in scans])
+        valid, ref = reference_at(stamps, gt.stamps_s, gt.poses_xytheta)
+        # the filter's update steps among the scans with a reference: a reference sparser
+        # than the updates gives steps as long as its spacing
+        have = np.flatnonzero(valid)
+        steps = have[update_steps(odom[have], d, a)] if len(have) else have
+        every = update_steps(odom, d, a)
+        pairs.append(np.c_[steps[:-1], steps[1:]] + n0)
+        filter_pairs.append(np.c_[every[:-1], every[1:]] + n0)
+        odoms.append(odom)
+        poses.append(ref)
+        valids.append(valid)
+        sources.append(gt.source)
+        n0 += len(scans)
+    odom, ref, valid = np.vstack(odoms), np.vstack(poses), np.concatenate(valids)
+    seq = np.concatenate([np.full(len(o), k) for k, o in enumerate(odoms)])
+    steps = np.vstack(pairs)
     current = (cfg.alpha1, cfg.alpha2, cfg.alpha3, cfg.alpha4, cfg.alpha5)
     half = len(steps) // 2
     # the reference's own scan-to-scan noise (a pose graph's jitter) is not the odometry's
-    rv = reference_noise(odom, ref, valid)
+    rv = reference_noise(odom, ref, valid, seq)
+    kw = {"model": model, "update_min_d_m": d, "update_min_a_rad": a, "valid": valid,
+          "sequence": seq, "reference_var": rv}
     try:
-        fit = fit_odometry_noise(odom, ref, model=model, update_min_d_m=d, update_min_a_rad=a,
-                                 steps=steps, valid=valid, reference_var=rv)
-        first = fit_odometry_noise(odom, ref, model=model, update_min_d_m=d,
-                                   update_min_a_rad=a, steps=steps[: half + 1], valid=valid,
-                                   reference_var=rv)
+        fit = fit_odometry_noise(odom, ref, pairs=steps, **kw)
+        first = fit_odometry_noise(odom, ref, pairs=steps[:half], **kw)
     except ValueError as exc:
         raise DataError(f"{exc} (the reference covers {valid.mean():.0%} of the scans; "
-                        f"{len(steps) - 1} odometry steps of {d:g} m / {a:g} rad)",
-                        file=reference_path or log) from None
+                        f"{len(steps)} odometry steps of {d:g} m / {a:g} rad)",
+                        file=refs[0] or logs[0]) from None
     terms = ("rot1", "trans", "rot2") if model.startswith("diff") else ("trans", "rot", "strafe")
     n_alphas = 5 if model.startswith("omni") else 4
     out = {
-        "log": str(log), "reference": gt.source, "scans": len(scans),
+        "log": ", ".join(str(x) for x in logs), "reference": ", ".join(sources),
+        "scans": len(odom),
         "reference_coverage": round(float(valid.mean()), 4), "model": model,
         "update_min_d_m": d, "update_min_a_rad": a, "steps": fit.steps,
         "rejected": fit.rejected, "alphas": [round(v, 6) for v in fit.alphas[:n_alphas]],
         "current_alphas": [float(v) for v in current[:n_alphas]], "terms": list(terms),
         "z_std_fitted": [round(v, 3) for v in fit.z_std],
         "z_std_holdout": [round(v, 3) for v in step_z_std(
-            odom, ref, first.alphas, model=model, steps=steps[half:], reference_var=rv)],
+            odom, ref, first.alphas, model=model, pairs=steps[half:], reference_var=rv)],
         "z_std_current": [round(v, 3) for v in step_z_std(
-            odom, ref, current, model=model, steps=steps, reference_var=rv)],
+            odom, ref, current, model=model, pairs=steps, reference_var=rv)],
         "trans_scale": round(fit.trans_scale, 5), "rot_scale": round(fit.rot_scale, 5),
         "mean_error": [round(v, 6) for v in fit.mean_error],
         "reference_noise_std": [round(v, 5) for v in fit.reference_std],
@@ -165,7 +190,8 @@ def calibrate_odometry(
         "warnings": [],
     }
     # the steps the filter takes on this odometry, all scans counted
-    filt = relative(odom[all_steps[:-1]], odom[all_steps[1:]]) if len(all_steps) > 1 else None
+    every = np.vstack(filter_pairs)
+    filt = relative(odom[every[:, 0]], odom[every[:, 1]]) if len(every) else None
     if filt is not None:
         f_m, f_rad = float(np.hypot(filt[:, 0], filt[:, 1]).mean()), float(
             np.abs(filt[:, 2]).mean())
@@ -191,8 +217,9 @@ def calibrate_odometry(
         values = {"odom_model": model, "update_min_d_m": d, "update_min_a_rad": a}
         values.update({f"alpha{i + 1}": max(out["alphas"][i], min_alpha)
                        for i in range(n_alphas)})
-        header = (f"# AMCL odometry noise fitted by gatmo calibrate to {Path(log).name} against "
-                  f"{gt.source}\n# over {fit.steps} steps of {d:g} m / {a:g} rad "
+        header = (f"# AMCL odometry noise fitted by gatmo calibrate to "
+                  f"{', '.join(Path(x).name for x in logs)} against {out['reference']}\n"
+                  f"# over {fit.steps} steps of {d:g} m / {a:g} rad "
                   f"({fit.rejected} outliers trimmed)"
                   + (f"; alphas floored at {min_alpha:g}" if min_alpha > 0 else "") + "\n")
         atomic_write_text(out_path, header + amcl_yaml_text(values, dialect))

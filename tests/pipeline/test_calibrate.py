@@ -185,3 +185,19 @@ def test_real_noise_free_stage_odometry_is_said_to_have_no_noise_and_floored(tmp
     assert min(alphas) == 0.005 and max(alphas) < 0.05  # AMCL's 0.2 are far too much here
     res = calibrate_odometry(bag)
     assert max(res["z_std_current"]) < 0.3
+
+
+def test_calibrate_pools_several_logs_without_a_step_across_them(tmp_path, capsys):
+    a, b = tmp_path / "a.log", tmp_path / "b.log"
+    write_log(a, seed=7)
+    write_log(b, seed=9)
+    one = calibrate_odometry(a)
+    both = calibrate_odometry([a, b])
+    # every step is within one log: the pooled steps are the two logs' own
+    two = calibrate_odometry(b)
+    assert both["steps"] + both["rejected"] == (one["steps"] + one["rejected"]
+                                                + two["steps"] + two["rejected"])
+    for got, want in zip(both["alphas"], ALPHAS, strict=False):
+        assert got == pytest.approx(want, rel=0.2)
+    assert main(["calibrate", str(a), str(b), "--reference", str(tmp_path / "x.tum")]) == 1
+    assert "one --reference per log" in capsys.readouterr().err
