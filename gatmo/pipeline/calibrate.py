@@ -106,20 +106,11 @@ def calibrate_odometry(
         step_z_std,
         update_steps,
     )
-    from gatmo.localization.config import AmclConfig
-    from gatmo.localization.params import amcl_yaml_dialect, amcl_yaml_text, load_amcl_yaml
+    from gatmo.localization.params import amcl_yaml_dialect, amcl_yaml_text
+    from gatmo.pipeline.config import load_amcl_config
     from gatmo.pipeline.runs import ground_truth_of, load_scans
 
-    if config is not None:
-        cfg = config
-    elif params_path is not None:
-        cfg = load_amcl_yaml(params_path)
-    elif config_path is not None or preset is not None:
-        from gatmo.pipeline.config import load_stack_config
-
-        cfg = load_stack_config(config_path, preset=preset).amcl
-    else:
-        cfg = AmclConfig()
+    cfg = config if config is not None else load_amcl_config(params_path, config_path, preset)
     logs = [log] if isinstance(log, str | Path) else list(log)
     if reference_path is None or isinstance(reference_path, str | Path):
         refs = [reference_path] * len(logs) if reference_path is None or len(logs) == 1 else None

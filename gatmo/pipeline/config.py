@@ -29,6 +29,20 @@ class StackConfig(GatmoModel):
                       "logs, log k (from 0) uses seed + k")
 
 
+def load_amcl_config(params_path: str | Path | None = None, config_path: str | Path | None = None,
+                     preset: str | None = None) -> AmclConfig:
+    """The localizer's configuration: the ROS AMCL YAML ``params_path``, else the ``amcl``
+    section of the gatmo stack YAML ``config_path`` or of the named stack configuration
+    ``preset``, else AMCL's defaults (what ``localize`` and ``calibrate`` take)."""
+    if params_path is not None:
+        from gatmo.localization.params import load_amcl_yaml
+
+        return load_amcl_yaml(params_path)
+    if config_path is not None or preset is not None:
+        return load_stack_config(config_path, preset=preset).amcl
+    return AmclConfig()
+
+
 def stack_config_class() -> type[StackConfig]:
     return StackConfig
 
@@ -254,6 +268,6 @@ def dump_stack_config(cfg) -> str:
     return dump_model(cfg)
 
 
-__all__ = ["STACK_PRESETS", "StackConfig", "dump_stack_config", "load_stack_config",
-           "real_stack_config", "sim_stack_config", "stack_config_class", "stack_preset",
-           "summarize_stack_config"]
+__all__ = ["STACK_PRESETS", "StackConfig", "dump_stack_config", "load_amcl_config",
+           "load_stack_config", "real_stack_config", "sim_stack_config", "stack_config_class",
+           "stack_preset", "summarize_stack_config"]

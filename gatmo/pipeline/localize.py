@@ -85,9 +85,8 @@ def run_localize(
     frame) if given, else the log's own ground truth."""
     from gatmo.datasets.open import open_map
     from gatmo.datasets.tum import write_tum
-    from gatmo.localization.config import AmclConfig
     from gatmo.localization.mcl import MonteCarloLocalizer
-    from gatmo.localization.params import load_amcl_yaml
+    from gatmo.pipeline.config import load_amcl_config
     from gatmo.pipeline.runs import (
         check_overlap,
         ground_truth_of,
@@ -99,16 +98,7 @@ def run_localize(
     )
 
     grid = open_map(map_yaml)
-    if config is not None:
-        cfg = config
-    elif params_path is not None:
-        cfg = load_amcl_yaml(params_path)
-    elif config_path is not None or preset is not None:
-        from gatmo.pipeline.config import load_stack_config
-
-        cfg = load_stack_config(config_path, preset=preset).amcl
-    else:
-        cfg = AmclConfig()
+    cfg = config if config is not None else load_amcl_config(params_path, config_path, preset)
     scans = load_scans(log, fmt, max_scans)
     loc = MonteCarloLocalizer.from_config(cfg, grid, np.random.default_rng(seed))
     pose0 = initial_pose_for(scans, initial_pose, global_localization, cfg.initial_pose_xytheta)
