@@ -155,11 +155,16 @@ def calibrate_odometry(
           "sequence": seq, "reference_var": rv}
     try:
         fit = fit_odometry_noise(odom, ref, pairs=steps, **kw)
-        first = fit_odometry_noise(odom, ref, pairs=steps[:half], **kw)
     except ValueError as exc:
         raise DataError(f"{exc} (the reference covers {valid.mean():.0%} of the scans; "
                         f"{len(steps)} odometry steps of {d:g} m / {a:g} rad)",
                         file=refs[0] or logs[0]) from None
+    try:  # the held-out check: fitted on the first half, scored on the second
+        first = fit_odometry_noise(odom, ref, pairs=steps[:half], **kw)
+        holdout = step_z_std(odom, ref, first.alphas, model=model, pairs=steps[half:],
+                             reference_var=rv)
+    except ValueError:  # too few steps for a half
+        holdout = (float("nan"),) * 3
     terms = ("rot1", "trans", "rot2") if model.startswith("diff") else ("trans", "rot", "strafe")
     n_alphas = 5 if model.startswith("omni") else 4
     out = {
@@ -170,8 +175,7 @@ def calibrate_odometry(
         "rejected": fit.rejected, "alphas": [round(v, 6) for v in fit.alphas[:n_alphas]],
         "current_alphas": [float(v) for v in current[:n_alphas]], "terms": list(terms),
         "z_std_fitted": [round(v, 3) for v in fit.z_std],
-        "z_std_holdout": [round(v, 3) for v in step_z_std(
-            odom, ref, first.alphas, model=model, pairs=steps[half:], reference_var=rv)],
+        "z_std_holdout": [round(v, 3) for v in holdout],
         "z_std_current": [round(v, 3) for v in step_z_std(
             odom, ref, current, model=model, pairs=steps, reference_var=rv)],
         "trans_scale": round(fit.trans_scale, 5), "rot_scale": round(fit.rot_scale, 5),
