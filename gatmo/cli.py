@@ -571,7 +571,7 @@ def calibrate(
     max_scans: Annotated[int | None, typer.Option("--max-scans", help="At most this many "
                                                   "scans.")] = None,
 ) -> None:
-    """Fit AMCL's odometry noise (alpha1-4, alpha5 for omni) to a log against reference poses.
+    """Fit AMCL's odometry noise (alpha1-4, alpha5 for omni) to logs against reference poses.
 
     The fit is made at the update thresholds and odometry model of the AMCL parameters given
     (else AMCL's defaults). z std is the RMS of the errors over the standard deviation the
