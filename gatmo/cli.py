@@ -564,6 +564,8 @@ def calibrate(
     out: Annotated[Path | None, typer.Option(
         "--out", help="Write the fitted alphas as AMCL YAML (Nav2's layout, or ROS 1's when "
         "--params is a ROS 1 file).")] = None,
+    report: Annotated[Path | None, typer.Option(
+        "--report", help="Write every figure of the fit as JSON.")] = None,
     min_alpha: Annotated[float, typer.Option(
         "--min-alpha", min=0.0, help="Least alpha written to --out (a filter given no noise "
         "of a kind cannot spread its particles that way).")] = 0.0,
@@ -582,7 +584,8 @@ def calibrate(
 
     res = calibrate_odometry(logs, reference_path=reference, stamp_offset_s=stamp_offset,
                              params_path=params, config_path=config, preset=preset, fmt=fmt,
-                             max_scans=max_scans, out_path=out, min_alpha=min_alpha)
+                             max_scans=max_scans, out_path=out, min_alpha=min_alpha,
+                             report_path=report)
     from rich.table import Table
 
     names = ", ".join(x.name for x in logs)

@@ -66,6 +66,7 @@ def calibrate_odometry(
     out_path: str | Path | None = None,
     config=None,
     min_alpha: float = 0.0,
+    report_path: str | Path | None = None,
 ) -> dict:
     """Fit AMCL's odometry alphas to ``log``'s odometry against the reference.
 
@@ -83,6 +84,7 @@ def calibrate_odometry(
         config: an :class:`AmclConfig` instead of the files.
         min_alpha: the least alpha written to ``out_path`` (the fit may find none of a kind of
             noise, and a filter given none cannot spread its particles that way).
+        report_path: write the returned dict here as JSON (NaN as null).
 
     Returns:
         a flat dict: ``model``, ``update_min_d_m``, ``update_min_a_rad``, ``steps``,
@@ -219,6 +221,16 @@ def calibrate_odometry(
                   + (f"; alphas floored at {min_alpha:g}" if min_alpha > 0 else "") + "\n")
         atomic_write_text(out_path, header + amcl_yaml_text(values, dialect))
         out["out"] = str(out_path)
+    if report_path is not None:
+        import json
+
+        def finite(v):
+            if isinstance(v, list):
+                return [finite(x) for x in v]
+            return None if isinstance(v, float) and not np.isfinite(v) else v
+
+        atomic_write_text(report_path, json.dumps({k: finite(v) for k, v in out.items()},
+                                                  indent=1) + "\n")
     return out
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +55,9 @@ def test_calibrate_recovers_the_alphas_of_a_log_and_writes_amcl_yaml_that_loads(
     assert (cfg.update_min_d_m, cfg.update_min_a_rad) == (0.25, 0.2)
     for got, want in zip((cfg.alpha1, cfg.alpha2, cfg.alpha3, cfg.alpha4), ALPHAS, strict=False):
         assert got == pytest.approx(want, rel=0.25)
-    res = calibrate_odometry(log)
+    report = tmp_path / "fit.json"
+    res = calibrate_odometry(log, report_path=report)
+    assert json.loads(report.read_text())["alphas"] == res["alphas"]
     np.testing.assert_allclose(res["z_std_holdout"], 1.0, atol=0.15)  # fits what it never saw
     # AMCL's defaults (0.2) predict errors far larger than these wheels make
     assert max(res["z_std_current"]) < 0.8
@@ -201,3 +204,18 @@ def test_calibrate_pools_several_logs_without_a_step_across_them(tmp_path, capsy
         assert got == pytest.approx(want, rel=0.2)
     assert main(["calibrate", str(a), str(b), "--reference", str(tmp_path / "x.tum")]) == 1
     assert "one --reference per log" in capsys.readouterr().err
+
+
+def test_a_simulated_run_calibrates_the_same_from_its_carmen_log_and_its_ros2_bag(tmp_path):
+    # the same odometry and ground truth through both readers (the bag's /odom interpolated
+    # at the scans' stamps); and the simulator's per-scan noise is not the filter's per update
+    from gatmo.pipeline.runs import simulate
+
+    simulate(tmp_path, runs=1, seed=5, bag=True)
+    stack = tmp_path / "stack.yaml"
+    clf = calibrate_odometry(tmp_path / "run_1.clf", config_path=stack)
+    bag = calibrate_odometry(tmp_path / "run_1_bag", config_path=stack)
+    assert clf["steps"] == bag["steps"]
+    np.testing.assert_allclose(clf["alphas"], bag["alphas"], rtol=1e-3, atol=1e-6)
+    assert clf["current_alphas"] == [0.05, 0.01, 0.05, 0.01]
+    assert max(clf["z_std_current"]) < 0.8  # per update, those predict too much noise
