@@ -64,7 +64,8 @@ def _scenario_summary(path: Path) -> dict:
 
 
 def _json_summary(path: Path) -> dict:
-    """An objects.json or a scenario.json, told apart by their ``format`` field."""
+    """An objects.json, a scenario.json or a calibrate report, told apart by their ``format``
+    field."""
     import json
 
     try:
@@ -73,6 +74,12 @@ def _json_summary(path: Path) -> dict:
         doc = None  # load_objects words the error
     if isinstance(doc, dict) and doc.get("format") == "gatmo-scenario":
         return _scenario_summary(path)
+    if isinstance(doc, dict) and doc.get("format") == "gatmo-calibration":
+        # gatmo calibrate --report: what was fitted, to what, and how well
+        keys = ("log", "reference", "model", "update_min_d_m", "update_min_a_rad", "steps",
+                "rejected", "current_alphas", "alphas", "z_std_current", "z_std_fitted",
+                "z_std_holdout", "trans_scale", "rot_scale", "warnings")
+        return {"kind": "odometry calibration"} | {k: doc[k] for k in keys if k in doc}
     return _objects_summary(path)
 
 

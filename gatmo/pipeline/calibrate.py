@@ -84,7 +84,8 @@ def calibrate_odometry(
         config: an :class:`AmclConfig` instead of the files.
         min_alpha: the least alpha written to ``out_path`` (the fit may find none of a kind of
             noise, and a filter given none cannot spread its particles that way).
-        report_path: write the returned dict here as JSON (NaN as null).
+        report_path: write the returned dict here as JSON (NaN as null, ``"format":
+            "gatmo-calibration"``; ``gatmo info`` reads it).
 
     Returns:
         a flat dict: ``model``, ``update_min_d_m``, ``update_min_a_rad``, ``steps``,
@@ -229,8 +230,8 @@ def calibrate_odometry(
                 return [finite(x) for x in v]
             return None if isinstance(v, float) and not np.isfinite(v) else v
 
-        atomic_write_text(report_path, json.dumps({k: finite(v) for k, v in out.items()},
-                                                  indent=1) + "\n")
+        doc = {"format": "gatmo-calibration"} | {k: finite(v) for k, v in out.items()}
+        atomic_write_text(report_path, json.dumps(doc, indent=1) + "\n")
     return out
 
 

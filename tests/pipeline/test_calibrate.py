@@ -58,6 +58,8 @@ def test_calibrate_recovers_the_alphas_of_a_log_and_writes_amcl_yaml_that_loads(
     report = tmp_path / "fit.json"
     res = calibrate_odometry(log, report_path=report)
     assert json.loads(report.read_text())["alphas"] == res["alphas"]
+    assert main(["info", str(report)]) == 0
+    assert "odometry calibration" in capsys.readouterr().out
     np.testing.assert_allclose(res["z_std_holdout"], 1.0, atol=0.15)  # fits what it never saw
     # AMCL's defaults (0.2) predict errors far larger than these wheels make
     assert max(res["z_std_current"]) < 0.8
