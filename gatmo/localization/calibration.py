@@ -241,11 +241,15 @@ def odometry_scales(odom_xytheta: np.ndarray, ref_xytheta: np.ndarray,
             1.0 / k if k > 0 else float("nan"))
 
 
-def _variance(feats: np.ndarray, alphas: np.ndarray, model: str, extra=0.0) -> np.ndarray:
-    v = feats @ alphas
+def _variance_of(lin: np.ndarray, model: str, extra=0.0) -> np.ndarray:
+    """The variance from the features' weighted sum ``lin`` (K, 3)."""
     if not model.endswith("-corrected"):  # ROS 1: the weighted sum is the standard deviation
-        v = v * v
-    return v + extra + _VAR_FLOOR
+        lin = lin * lin
+    return lin + extra + _VAR_FLOOR
+
+
+def _variance(feats: np.ndarray, alphas: np.ndarray, model: str, extra=0.0) -> np.ndarray:
+    return _variance_of(feats @ alphas, model, extra)
 
 
 def normalized_errors(errors: np.ndarray, features: np.ndarray, alphas, model: str,
@@ -262,11 +266,10 @@ def _nll(alphas: np.ndarray, e2: np.ndarray, feats: np.ndarray, mask: np.ndarray
          model: str, extra) -> tuple[float, np.ndarray]:
     """Negative log-likelihood (constant dropped) and its gradient in the alphas."""
     lin = feats @ alphas  # (K, 3)
-    corrected = model.endswith("-corrected")
-    var = (lin if corrected else lin * lin) + extra + _VAR_FLOOR
+    var = _variance_of(lin, model, extra)
     r = np.where(mask, 0.5 * (np.log(var) + e2 / var), 0.0)
     dv = np.where(mask, 0.5 * (1.0 / var - e2 / var**2), 0.0)  # d nll / d var
-    if not corrected:
+    if not model.endswith("-corrected"):
         dv = dv * 2.0 * lin
     grad = np.einsum("kc,kcj->j", dv, feats)
     return float(r.sum()), grad

@@ -100,15 +100,9 @@ NAV2_ROBOT_MODELS = {
 }
 
 
-def load_amcl_yaml(path: str | Path) -> AmclConfig:
-    """Read a ROS 1 or Nav2 AMCL YAML into an :class:`AmclConfig`."""
-    path = Path(path)
-    data, text = read_yaml(path)
-    lines = yaml_key_lines(text)
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise ConfigError("expected a mapping of AMCL parameters", file=path)
+def _amcl_section(data: dict) -> tuple[object, tuple, bool]:
+    """(the AMCL parameters, the keys leading to them, whether the layout is Nav2's) of a
+    parsed AMCL YAML: flat (ROS 1), under ``amcl:`` and/or ``ros__parameters:`` (Nav2)."""
     prefix: tuple = ()
     nav2 = False
     if "amcl" in data and isinstance(data["amcl"], dict):
@@ -118,6 +112,19 @@ def load_amcl_yaml(path: str | Path) -> AmclConfig:
         data = data["ros__parameters"] or {}
         prefix += ("ros__parameters",)
         nav2 = True
+    return data, prefix, nav2
+
+
+def load_amcl_yaml(path: str | Path) -> AmclConfig:
+    """Read a ROS 1 or Nav2 AMCL YAML into an :class:`AmclConfig`."""
+    path = Path(path)
+    data, text = read_yaml(path)
+    lines = yaml_key_lines(text)
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError("expected a mapping of AMCL parameters", file=path)
+    data, prefix, nav2 = _amcl_section(data)
     if not isinstance(data, dict):
         raise ConfigError("expected a mapping of AMCL parameters", file=path)
     table = dict(COMMON, **(NAV2 if nav2 else ROS1))
@@ -162,9 +169,7 @@ def load_amcl_yaml(path: str | Path) -> AmclConfig:
 def amcl_yaml_dialect(path: str | Path) -> str:
     """``"nav2"`` when the AMCL YAML at ``path`` holds ``ros__parameters``, else ``"ros1"``."""
     data, _ = read_yaml(Path(path))
-    if isinstance(data, dict) and isinstance(data.get("amcl"), dict):
-        data = data["amcl"]
-    return "nav2" if isinstance(data, dict) and "ros__parameters" in data else "ros1"
+    return "nav2" if isinstance(data, dict) and _amcl_section(data)[2] else "ros1"
 
 
 def amcl_yaml_text(values: dict, dialect: str = "nav2") -> str:
