@@ -421,7 +421,8 @@ def batch(
 # ------------------------------------------------------------------------- config
 @config_app.command("dump")
 def config_dump(
-    component: Annotated[str, typer.Argument(help="amcl | gatmo | sim | stack")] = "amcl",
+    component: Annotated[str, typer.Argument(
+        help="amcl | gatmo | sim | stack | mapping (map build)")] = "amcl",
     params: Annotated[
         Path | None, typer.Option("--params", help="Load this file first (e.g. ROS AMCL YAML).")
     ] = None,
@@ -468,9 +469,14 @@ def config_dump(
         from gatmo.pipeline.config import load_stack_config
 
         cfg = load_stack_config(params)
+    elif component == "mapping":
+        from gatmo.pipeline.config import load_map_build_config
+
+        cfg = load_map_build_config(params)
     else:
         raise ConfigError(
-            f"unknown component {component!r}: amcl | gatmo | sim | stack", field="component"
+            f"unknown component {component!r}: amcl | gatmo | sim | stack | mapping",
+            field="component"
         )
     sys.stdout.write(dump_model(cfg, comments=comments))
 
@@ -496,25 +502,39 @@ def map_render(
 @map_app.command("build")
 def map_build(
     log: Annotated[Path, typer.Argument(help="Raw log or bag with scans and odometry.")],
-    out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it).")],
+    out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it; the "
+                                      "configuration used beside it as MAP.build.yaml).")],
     poses_out: Annotated[
         Path | None, typer.Option("--poses-out", help="Optimized pose of every scan (TUM).")
     ] = None,
-    resolution: Annotated[float, typer.Option(help="Cell size [m].")] = 0.05,
-    max_range: Annotated[float, typer.Option(help="Use returns up to this range [m].")] = 20.0,
+    odometry_out: Annotated[
+        Path | None, typer.Option("--odometry-out", help="The scan-matching odometry's pose of "
+                                  "every scan, before loop closure (TUM).")
+    ] = None,
+    config: Annotated[
+        Path | None, typer.Option("--config", help="Map-build configuration YAML (sections "
+                                  "icp, graph, render; `gatmo config dump mapping`, or the "
+                                  "MAP.build.yaml of an earlier build).")
+    ] = None,
+    resolution: Annotated[float | None, typer.Option(
+        help="Cell size [m]; replaces the configuration's render.resolution_m (0.05).")] = None,
+    max_range: Annotated[float | None, typer.Option(
+        help="Use returns up to this range [m]; replaces render.max_range_m (20).")] = None,
     max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
     fmt: FormatOpt = None,
 ) -> None:
     """Build a map from a raw log (scan matching, loop closures, gtsam pose graph).
 
     The occupancy grid is ray traced (log-odds) at the optimized poses; a map_server map."""
+    from gatmo.pipeline.config import load_map_build_config
     from gatmo.pipeline.mapping import build_map
 
+    cfg = load_map_build_config(config)
     bar, update = _progress("map build")
     with bar:
-        summary = build_map(log, out, poses_out=poses_out, resolution_m=resolution,
-                            max_range_m=max_range, fmt=fmt, max_scans=max_scans,
-                            progress=update)
+        summary = build_map(log, out, cfg=cfg, poses_out=poses_out, odometry_out=odometry_out,
+                            resolution_m=resolution, max_range_m=max_range, fmt=fmt,
+                            max_scans=max_scans, progress=update)
     _print_mapping("map build", summary.as_dict())
 
 

@@ -126,6 +126,9 @@ def validation_to_config_error(
                f"{_REMOVED[names[-1]]!r}, is still accepted (got {err.get('input')!r})")
     elif err.get("type") == "extra_forbidden":
         msg = "unknown key"
+    elif err.get("type") == "value_error" and isinstance(err.get("input"), dict):
+        # a model's own check across its fields: its message names them and their values
+        msg = msg.removeprefix("Value error, ")
     elif "input" in err and err.get("type") != "missing":
         msg = f"{msg} (got {err['input']!r})"
     return ConfigError(msg, file=file, line=line, field=field)

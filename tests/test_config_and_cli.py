@@ -109,9 +109,9 @@ def _config_models():
     from pydantic import BaseModel
 
     from gatmo.datasets.sim import SimConfig
-    from gatmo.pipeline.config import StackConfig
+    from gatmo.pipeline.config import MapBuildConfig, StackConfig
 
-    seen, todo = [], [StackConfig, SimConfig]
+    seen, todo = [], [StackConfig, SimConfig, MapBuildConfig]
     while todo:
         m = todo.pop()
         if m in seen:
@@ -125,7 +125,7 @@ def _config_models():
 
 def test_every_parameter_has_a_description():
     models = _config_models()
-    assert len(models) >= 8  # stack, amcl, gatmo, icp, fusion, sim and its parts
+    assert len(models) >= 11  # stack, amcl, gatmo, icp, fusion, sim and its parts, map build
     missing = [f"{m.__name__}.{k}" for m in models for k, f in m.model_fields.items()
                if not (f.description or "").strip()]
     assert not missing, f"parameters without a description: {missing}"
@@ -137,12 +137,19 @@ def test_commented_dump_loads_back_to_the_same_configuration(tmp_path):
     from gatmo.config import dump_model, load_model
     from gatmo.datasets.sim import SimConfig
     from gatmo.localization.config import AmclConfig
-    from gatmo.pipeline.config import StackConfig, load_stack_config
+    from gatmo.pipeline.config import (
+        MapBuildConfig,
+        StackConfig,
+        load_map_build_config,
+        load_stack_config,
+    )
 
     cfg = StackConfig()
     cfg.amcl.sigma_hit_m = 0.123  # a value off its default survives the round trip
     cfg.gatmo.absence_far_hits = True
-    for model in (cfg, SimConfig(), AmclConfig(max_beams=33)):
+    build = MapBuildConfig()
+    build.graph.match.min_score = 0.55
+    for model in (cfg, SimConfig(), AmclConfig(max_beams=33), build):
         text = dump_model(model, comments=True)
         assert yaml.safe_load(text) == yaml.safe_load(dump_model(model))
         # every field is written, and the descriptions are there as comments
@@ -153,6 +160,8 @@ def test_commented_dump_loads_back_to_the_same_configuration(tmp_path):
     assert load_stack_config(p) == cfg
     p.write_text(dump_model(SimConfig(), comments=True))
     assert load_model(SimConfig, p) == SimConfig()
+    p.write_text(dump_model(build, comments=True))
+    assert load_map_build_config(p) == build != MapBuildConfig()
 
 
 def test_cli_config_dump_writes_descriptions(capsys):

@@ -84,8 +84,9 @@ def _json_summary(path: Path) -> dict:
 
 
 def _yaml_summary(path: Path) -> dict:
-    """A map_server map YAML, a gatmo stack configuration (``gatmo config dump stack``) or a
-    ROS AMCL parameter file, told apart by their top-level keys."""
+    """A map_server map YAML, a gatmo stack configuration (``gatmo config dump stack``), a map
+    build configuration (``gatmo config dump mapping``, ``MAP.build.yaml``) or a ROS AMCL
+    parameter file, told apart by their top-level keys."""
     from gatmo.config import read_yaml
 
     data, _ = read_yaml(path)
@@ -94,6 +95,13 @@ def _yaml_summary(path: Path) -> dict:
 
         # Nav2 nests its parameters under `<node>: ros__parameters:`; ROS 1 is flat
         nav2 = any(isinstance(v, dict) and "ros__parameters" in v for v in data.values())
+        from gatmo.pipeline.config import MapBuildConfig
+
+        if data and not nav2 and set(data) <= set(MapBuildConfig.model_fields) \
+                and set(data) & {"graph", "render"}:
+            from gatmo.pipeline.config import load_map_build_config, summarize_map_build_config
+
+            return summarize_map_build_config(load_map_build_config(path))
         if data and not nav2 and set(data) <= set(StackConfig.model_fields):
             from gatmo.pipeline.config import load_stack_config, summarize_stack_config
 

@@ -3,20 +3,53 @@
 from __future__ import annotations
 
 import numpy as np
+from pydantic import Field, model_validator
 
+from gatmo.config import GatmoModel
 from gatmo.geometry import compose, transform_points
 from gatmo.maps.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from gatmo.maps.raycast import traverse_rays
 
 
+class RenderConfig(GatmoModel):
+    """How scans at known poses become an occupancy grid (:func:`render_map`)."""
+
+    resolution_m: float = Field(0.05, gt=0, description="cell size of the map")
+    max_range_m: float = Field(
+        20.0, gt=0, description="returns up to this range mark their cell occupied; longer and "
+        "max-range beams clear space up to this range without an endpoint")
+    l_occ: float = Field(0.85, gt=0, description="log-odds added to a beam's endpoint cell")
+    l_free: float = Field(-0.4, lt=0, description="log-odds added to each cell a beam crosses")
+    l_clamp: float = Field(
+        5.0, gt=0, description="log-odds are clamped to +-this after each scan, so a cell "
+        "can change its mind (a door opened)")
+    margin_m: float = Field(1.0, ge=0, description="room left around the reach of the scans")
+    occupied_thresh: float = Field(
+        0.65, gt=0, lt=1, description="a cell is occupied above this probability (map_server's "
+        "occupied_thresh)")
+    free_thresh: float = Field(
+        0.196, gt=0, lt=1, description="a cell is free below this probability (map_server's "
+        "free_thresh); between the two it is unknown")
+
+    @model_validator(mode="after")
+    def _thresholds_ordered(self) -> RenderConfig:
+        if self.free_thresh >= self.occupied_thresh:
+            raise ValueError(f"free_thresh ({self.free_thresh}) must be below occupied_thresh "
+                             f"({self.occupied_thresh})")
+        return self
+
+
 def render_map(scans, poses_xytheta: np.ndarray, *, resolution_m: float = 0.05,
                max_range_m: float = 20.0, l_occ: float = 0.85, l_free: float = -0.4,
-               l_clamp: float = 5.0, margin_m: float = 1.0) -> OccupancyGrid:
+               l_clamp: float = 5.0, margin_m: float = 1.0, occupied_thresh: float = 0.65,
+               free_thresh: float = 0.196) -> OccupancyGrid:
     """Log-odds grid from scans (sequence of Scan) at base poses (N, 3) in the map frame.
 
     Cells crossed by a beam get ``l_free``, the endpoint cell ``l_occ``; max-range and invalid
     beams clear space up to ``max_range_m`` without an endpoint. The result is thresholded as
-    map_server would (p > 0.65 occupied, p < 0.196 free, else unknown).
+    map_server would (p > ``occupied_thresh`` occupied, p < ``free_thresh`` free, else
+    unknown). The keywords are :class:`RenderConfig`'s fields: ``render_map(scans, poses,
+    **cfg.model_dump())``.
     """
     poses = np.asarray(poses_xytheta, dtype=float)
     lo = poses[:, :2].min(axis=0) - max_range_m - margin_m
@@ -47,6 +80,6 @@ def render_map(scans, poses_xytheta: np.ndarray, *, resolution_m: float = 0.05,
         np.clip(logodds, -l_clamp, l_clamp, out=logodds)
     p = 1.0 - 1.0 / (1.0 + np.exp(logodds))
     cells = np.full(logodds.shape, UNKNOWN, dtype=np.int8)
-    cells[touched & (p > 0.65)] = OCCUPIED
-    cells[touched & (p < 0.196)] = FREE
+    cells[touched & (p > occupied_thresh)] = OCCUPIED
+    cells[touched & (p < free_thresh)] = FREE
     return OccupancyGrid(cells, resolution_m, (lo[0], lo[1], 0.0))

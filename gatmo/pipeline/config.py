@@ -9,9 +9,11 @@ from pydantic import Field
 
 from gatmo.config import GatmoModel, dump_model, load_model
 from gatmo.localization.config import AmclConfig
+from gatmo.maps.mapping import RenderConfig
 from gatmo.objects.config import GatmoConfig
 from gatmo.pipeline.stack import FusionConfig
 from gatmo.scanmatch.odometry import IcpConfig
+from gatmo.scanmatch.posegraph import GraphConfig
 
 
 class StackConfig(GatmoModel):
@@ -27,6 +29,42 @@ class StackConfig(GatmoModel):
                                  "(offset resets, published pose, masks, relocalization)")
     seed: int = Field(0, description="seed of the localizers' random draws; over several "
                       "logs, log k (from 0) uses seed + k")
+
+
+class MapBuildConfig(GatmoModel):
+    """``gatmo map build``: icp: the scan-matching odometry; graph: keyframes, loop closures and
+    the pose graph; render: the occupancy grid drawn at the optimized poses. Saved beside every
+    map it builds (``MAP.build.yaml``) and dumped by ``gatmo config dump mapping``."""
+
+    icp: IcpConfig = Field(default_factory=IcpConfig,
+                           description="the scan-matching odometry (ICP against recent scans)")
+    graph: GraphConfig = Field(default_factory=GraphConfig,
+                               description="keyframes, loop closures and the gtsam pose graph")
+    render: RenderConfig = Field(default_factory=RenderConfig,
+                                 description="the occupancy grid drawn at the optimized poses")
+
+
+def load_map_build_config(config_path: str | Path | None = None) -> MapBuildConfig:
+    """``config_path``'s map-build configuration (as ``gatmo config dump mapping`` writes, or the
+    ``MAP.build.yaml`` an earlier build saved), else the defaults."""
+    if config_path is None:
+        return MapBuildConfig()
+    return load_model(MapBuildConfig, config_path)
+
+
+def summarize_map_build_config(cfg: MapBuildConfig) -> dict:
+    """What ``gatmo info`` says of a map-build configuration: the figures a user tunes first,
+    and how many parameters differ from the defaults."""
+    g, r = cfg.graph, cfg.render
+    return {"kind": "map build config",
+            "parameters_not_defaults": _differences(cfg.model_dump(),
+                                                    MapBuildConfig().model_dump()),
+            "resolution_m": r.resolution_m, "max_range_m": r.max_range_m,
+            "keyframe_every": f"{g.keyframe_dist_m:g} m / "
+                              f"{math.degrees(g.keyframe_angle_rad):.3g} deg",
+            "closure_window_max": f"{g.window_max_m:g} m / "
+                                  f"{math.degrees(g.window_theta_max_rad):.3g} deg",
+            "closures_agreeing": g.group_size, "icp_max_corr_dist_m": cfg.icp.max_corr_dist_m}
 
 
 def load_amcl_config(params_path: str | Path | None = None, config_path: str | Path | None = None,
@@ -268,6 +306,7 @@ def dump_stack_config(cfg) -> str:
     return dump_model(cfg)
 
 
-__all__ = ["STACK_PRESETS", "StackConfig", "dump_stack_config", "load_amcl_config",
-           "load_stack_config", "real_stack_config", "sim_stack_config", "stack_config_class",
-           "stack_preset", "summarize_stack_config"]
+__all__ = ["STACK_PRESETS", "MapBuildConfig", "StackConfig", "dump_stack_config",
+           "load_amcl_config", "load_map_build_config", "load_stack_config",
+           "real_stack_config", "sim_stack_config", "stack_config_class", "stack_preset",
+           "summarize_map_build_config", "summarize_stack_config"]

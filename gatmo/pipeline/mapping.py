@@ -64,7 +64,9 @@ class BuildSummary:
     resolution_m: float
     seconds: float
     out: str
+    config_out: str  # the configuration the map was built with (MAP.build.yaml)
     poses_out: str | None
+    odometry_out: str | None
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -74,6 +76,8 @@ def build_trajectory(scans, *, icp_cfg=None, graph_cfg=None,
                      progress: Callable[[int, int], None] | None = None):
     """Scan-matching odometry then the pose graph with loop closures over ``scans``.
 
+    ``icp_cfg``: :class:`~gatmo.scanmatch.odometry.IcpConfig`; ``graph_cfg``:
+    :class:`~gatmo.scanmatch.posegraph.GraphConfig` (defaults when None).
     Returns (ICP odometry poses (N, 3), optimized poses (N, 3), GraphResult, odometry stats).
     Poses are the base in the frame of the first scan.
     """
@@ -97,19 +101,41 @@ def build_trajectory(scans, *, icp_cfg=None, graph_cfg=None,
     return poses, corrected, res, dict(odo.stats)
 
 
+def build_config_path(out_yaml: str | Path) -> Path:
+    """Where ``gatmo map build`` saves the configuration a map was built with: beside the map's
+    YAML, ``MAP.yaml`` -> ``MAP.build.yaml``."""
+    out_yaml = Path(out_yaml)
+    return out_yaml.with_name(out_yaml.stem + ".build.yaml")
+
+
 def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | None = None,
-              resolution_m: float = 0.05, max_range_m: float = 20.0, fmt: str | None = None,
-              image_format: str = "pgm", max_scans: int | None = None,
+              odometry_out: str | Path | None = None, cfg=None,
+              resolution_m: float | None = None, max_range_m: float | None = None,
+              fmt: str | None = None, image_format: str = "pgm", max_scans: int | None = None,
               progress: Callable[[int, int], None] | None = None) -> BuildSummary:
     """``gatmo map build``: a map_server map from a raw log (scans + odometry): scan-matching
     odometry, loop closures, a gtsam pose graph, then log-odds ray tracing at the optimized
-    poses. ``poses_out`` gets the optimized pose of every scan (TUM, the first scan's frame)."""
+    poses.
+
+    ``cfg``: a :class:`~gatmo.pipeline.config.MapBuildConfig` (defaults when None);
+    ``resolution_m`` / ``max_range_m`` replace its ``render`` section's. The configuration used
+    is saved beside the map (:func:`build_config_path`), so the map can be built again.
+    ``poses_out`` gets the optimized pose of every scan, ``odometry_out`` the scan-matching
+    odometry's (before loop closure); TUM, in the first scan's frame."""
+    from gatmo._io import atomic_write_text
+    from gatmo.config import dump_model
     from gatmo.datasets.open import open_log
     from gatmo.datasets.tum import write_tum
     from gatmo.maps.io import save_map
     from gatmo.maps.mapping import render_map
+    from gatmo.pipeline.config import MapBuildConfig
 
     t0 = time.perf_counter()
+    cfg = (cfg or MapBuildConfig()).model_copy(deep=True)
+    if resolution_m is not None:
+        cfg.render.resolution_m = resolution_m
+    if max_range_m is not None:
+        cfg.render.max_range_m = max_range_m
     src = open_log(log, fmt=fmt, skip_bad=True)
     scans = []
     for s in src:
@@ -118,11 +144,17 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
             break
     if len(scans) < 2:
         raise DataError(f"{len(scans)} scans: too few to build a map", file=log)
-    _, poses, res, odo_stats = build_trajectory(scans, progress=progress)
-    grid = render_map(scans, poses, resolution_m=resolution_m, max_range_m=max_range_m)
+    odometry, poses, res, odo_stats = build_trajectory(scans, icp_cfg=cfg.icp,
+                                                       graph_cfg=cfg.graph, progress=progress)
+    grid = render_map(scans, poses, **cfg.render.model_dump())
     save_map(grid, out_yaml, image_format=image_format)
+    config_out = build_config_path(out_yaml)
+    atomic_write_text(config_out, dump_model(cfg, comments=True))
+    stamps = np.array([s.stamp_s for s in scans])
     if poses_out is not None:
-        write_tum(poses_out, np.array([s.stamp_s for s in scans]), poses)
+        write_tum(poses_out, stamps, poses)
+    if odometry_out is not None:
+        write_tum(odometry_out, stamps, odometry)
     if progress is not None:
         progress(2 * len(scans), 2 * len(scans))
     st = res.stats
@@ -131,6 +163,8 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
         few_points=int(odo_stats.get("fallback_few_points", 0)), keyframes=len(res.keyframes),
         closures_accepted=len(res.closures), closures_rejected=int(st.get("rejected", 0)),
         closures_unconfirmed=int(st.get("unconfirmed", 0)), closures_pruned=res.pruned,
-        size_cells=f"{grid.width} x {grid.height}", resolution_m=resolution_m,
+        size_cells=f"{grid.width} x {grid.height}", resolution_m=cfg.render.resolution_m,
         seconds=round(time.perf_counter() - t0, 1), out=str(out_yaml),
-        poses_out=None if poses_out is None else str(poses_out))
+        config_out=str(config_out),
+        poses_out=None if poses_out is None else str(poses_out),
+        odometry_out=None if odometry_out is None else str(odometry_out))

@@ -11,9 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field
 from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
+from gatmo.config import GatmoModel
 from gatmo.geometry import relative, transform_points, wrap_angle
 from gatmo.scanmatch.icp import IcpResult, icp_2d, normals_of, voxel_downsample
 
@@ -167,24 +169,46 @@ def correlative_search(source_xy: np.ndarray, field: LikelihoodField, guess_xyth
     return SearchResult(pose, float(sb), second, refined, exhausted)
 
 
-@dataclass
-class MatchConfig:
+class MatchConfig(GatmoModel):
     """Search window, grid and the strict acceptance test of a loop closure."""
 
-    field_resolution_m: float = 0.05
-    field_sigma_m: float = 0.1
-    search_voxel_m: float = 0.1  # source points are thinned to this for the search
-    step_theta_rad: float = float(np.radians(0.7))
-    coarse_cells: int = 6
-    min_score: float = 0.4  # mean likelihood of the source points at the best pose
-    ambiguity_ratio: float = 0.9  # a second peak scoring this close to the best: ambiguous
-    ambiguity_radius_m: float = 0.3  # ... if this far from the best (or ambiguity_theta_rad)
-    ambiguity_theta_rad: float = float(np.radians(5.0))
-    max_refine: int = 400
-    min_fitness: float = 0.5  # ICP inliers / points
-    max_rmse_m: float = 0.05
-    max_icp_shift_m: float = 0.2  # ICP refinement vs search result
-    max_range_m: float = 15.0
+    field_resolution_m: float = Field(
+        0.05, gt=0, description="cell size of the likelihood field the search scores on")
+    field_sigma_m: float = Field(
+        0.1, gt=0, description="std of the gaussian around each target point in that field")
+    search_voxel_m: float = Field(
+        0.1, gt=0, description="the source points are thinned to one per voxel this size for "
+        "the search (ICP afterwards takes them all)")
+    step_theta_rad: float = Field(
+        float(np.radians(0.7)), gt=0, description="heading step of the search")
+    coarse_cells: int = Field(
+        6, ge=1, description="branch-and-bound: the coarse level's blocks are this many field "
+        "cells wide")
+    min_score: float = Field(
+        0.4, ge=0, le=1, description="a closure is refused unless the mean likelihood of the "
+        "source points at the best pose reaches this")
+    ambiguity_ratio: float = Field(
+        0.9, gt=0, le=1, description="a second peak scoring this close to the best (and "
+        "ambiguity_radius_m or ambiguity_theta_rad away from it) makes the match ambiguous: "
+        "refused (corridors)")
+    ambiguity_radius_m: float = Field(
+        0.3, gt=0, description="a second peak this far from the best is a rival place")
+    ambiguity_theta_rad: float = Field(
+        float(np.radians(5.0)), gt=0,
+        description="a second peak turned this far from the best is a rival too")
+    max_refine: int = Field(
+        400, ge=1, description="most coarse blocks refined before the search gives up "
+        "(exhausted: refused as ambiguous)")
+    min_fitness: float = Field(
+        0.5, ge=0, le=1, description="ICP's inliers over the source points, at least")
+    max_rmse_m: float = Field(0.05, gt=0, description="ICP's residual, at most")
+    max_icp_shift_m: float = Field(
+        0.2, gt=0, description="ICP's refinement may move the search's pose this far, at most")
+    max_icp_shift_rad: float = Field(
+        float(np.radians(3.0)), gt=0,
+        description="... and turn it this far, at most")
+    max_range_m: float = Field(
+        15.0, gt=0, description="source points farther than this from the robot are left out")
 
 
 @dataclass
@@ -238,7 +262,7 @@ def match_to_submap(source_xy: np.ndarray, target_xy: np.ndarray, guess_xytheta,
         return ClosureMatch(r2.T_target_source, sr, r2, False, "degenerate")
     if r2.fitness < cfg.min_fitness or r2.rmse_m > cfg.max_rmse_m:
         return ClosureMatch(r2.T_target_source, sr, r2, False, "poor fit")
-    if np.hypot(shift[0], shift[1]) > cfg.max_icp_shift_m or abs(shift[2]) > np.radians(3):
+    if np.hypot(shift[0], shift[1]) > cfg.max_icp_shift_m or abs(shift[2]) > cfg.max_icp_shift_rad:
         return ClosureMatch(r2.T_target_source, sr, r2, False, "icp disagrees")
     return ClosureMatch(r2.T_target_source, sr, r2, True, "ok")
 

@@ -24,8 +24,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydantic import Field
 from scipy.spatial import cKDTree
 
+from gatmo.config import GatmoModel
 from gatmo.geometry import compose, inverse, relative, wrap_angle
 from gatmo.scanmatch.correlative import (
     MatchConfig,
@@ -36,39 +38,78 @@ from gatmo.scanmatch.correlative import (
 from gatmo.scanmatch.icp import voxel_downsample
 
 
-@dataclass
-class GraphConfig:
-    keyframe_dist_m: float = 0.5
-    keyframe_angle_rad: float = 0.35
-    min_points: int = 30  # keyframes with fewer valid points take no part in closures
-    submap_half_width: int = 15  # keyframes either side merged into a closure target
-    submap_voxel_m: float = 0.05
-    closure_min_separation: int = 20  # keyframes apart
-    closure_every: int = 1  # search closures from every n-th keyframe
-    closure_max_candidates: int = 2  # earlier visits tried per keyframe (nearest first)
-    closure_skip_after_accept: int = 1  # keyframes to wait after a confirmed closure
-    closure_max_dist_m: float = 4.0  # a match farther from the submap's centre is refused
-    track_span: int = 3  # closures this recent (keyframes) narrow the window near them
-    group_size: int = 3  # a closure enters the graph once this many agree with each other
-    group_span: int = 15  # ... found within this many keyframes
-    group_xy_m: float = 0.3  # agreement: the loop through two closures and odometry closes
-    group_theta_rad: float = float(np.radians(3.0))  # ... within these bounds
-    window_base_m: float = 0.6  # search half-width at zero path length
-    window_per_m: float = 0.05  # ... growing with the path driven between the two keyframes
-    window_max_m: float = 12.0
-    window_theta_base_rad: float = float(np.radians(6.0))
-    window_theta_per_m: float = float(np.radians(0.5))
-    window_theta_max_rad: float = float(np.radians(57.0))
-    match: MatchConfig = field(default_factory=MatchConfig)
-    odom_sigma_xy_m: float = 0.02
-    odom_sigma_xy_per_m: float = 0.05
-    odom_sigma_theta_rad: float = 0.01
-    odom_sigma_theta_per_rad: float = 0.05
-    closure_sigma_xy_m: float = 0.05
-    closure_sigma_theta_rad: float = 0.02
-    robust_scale: float = 1.0  # Cauchy kernel scale on the whitened closure error
-    prune_xy_m: float = 0.25  # after optimization, closures off by more are dropped
-    prune_theta_rad: float = float(np.radians(4.0))
+class GraphConfig(GatmoModel):
+    """Keyframes, loop-closure search and acceptance, and the pose graph's noise models."""
+
+    keyframe_dist_m: float = Field(
+        0.5, gt=0, description="a scan becomes a keyframe (a node of the graph) when the "
+        "scan-matching odometry has moved this far since the last one, or turned "
+        "keyframe_angle_rad")
+    keyframe_angle_rad: float = Field(0.35, gt=0, description="see keyframe_dist_m")
+    keyframe_voxel_m: float = Field(
+        0.05, gt=0, description="each keyframe's scan is thinned to one point per voxel this "
+        "size (closure search and submaps)")
+    min_points: int = Field(
+        30, ge=1, description="keyframes with fewer valid points take no part in closures")
+    submap_half_width: int = Field(
+        15, ge=0, description="keyframes either side of a candidate merged into the submap a "
+        "closure is matched against")
+    submap_voxel_m: float = Field(0.05, gt=0, description="the submap is thinned to this")
+    closure_min_separation: int = Field(
+        20, ge=1, description="a closure joins keyframes at least this many keyframes apart")
+    closure_every: int = Field(
+        1, ge=1, description="closures are searched from every n-th keyframe")
+    closure_max_candidates: int = Field(
+        2, ge=1, description="earlier visits tried per keyframe, nearest first")
+    closure_skip_after_accept: int = Field(
+        1, ge=0, description="keyframes to wait after a confirmed closure before searching "
+        "again")
+    closure_max_dist_m: float = Field(
+        4.0, gt=0, description="a match farther than this from the submap's centre is refused")
+    track_span: int = Field(
+        3, ge=0, description="a closure confirmed this few keyframes ago narrows the next "
+        "search's window to the neighbourhood it found")
+    group_size: int = Field(
+        3, ge=1, description="a closure enters the graph once this many matches agree with "
+        "each other (1: every accepted match at once)")
+    group_span: int = Field(
+        15, ge=1, description="... matches found within this many keyframes")
+    group_xy_m: float = Field(
+        0.3, gt=0, description="two matches agree when the loop through both and the "
+        "odometry between them closes within this, and group_theta_rad")
+    group_theta_rad: float = Field(float(np.radians(3.0)), gt=0, description="see group_xy_m")
+    window_base_m: float = Field(
+        0.6, gt=0, description="closure search half-width at zero path driven between the two "
+        "keyframes")
+    window_per_m: float = Field(
+        0.05, ge=0, description="... growing by this per metre driven (the odometry's drift)")
+    window_max_m: float = Field(12.0, gt=0, description="... up to this")
+    window_theta_base_rad: float = Field(
+        float(np.radians(6.0)), gt=0, description="heading half-width at zero path driven")
+    window_theta_per_m: float = Field(
+        float(np.radians(0.5)), ge=0, description="... growing by this per metre driven")
+    window_theta_max_rad: float = Field(
+        float(np.radians(57.0)), gt=0, description="... up to this")
+    match: MatchConfig = Field(
+        default_factory=MatchConfig,
+        description="the closure match: correlative search, ICP and the acceptance test")
+    odom_sigma_xy_m: float = Field(
+        0.02, gt=0, description="std of an odometry edge's translation, per keyframe step")
+    odom_sigma_xy_per_m: float = Field(0.05, ge=0, description="... plus this per metre")
+    odom_sigma_theta_rad: float = Field(
+        0.01, gt=0, description="std of an odometry edge's rotation, per keyframe step")
+    odom_sigma_theta_per_rad: float = Field(0.05, ge=0, description="... plus this per rad")
+    closure_sigma_xy_m: float = Field(0.05, gt=0, description="std of a closure's translation")
+    closure_sigma_theta_rad: float = Field(0.02, gt=0,
+                                           description="std of a closure's rotation")
+    robust_scale: float = Field(
+        1.0, gt=0, description="scale of the final pass's Cauchy kernel on the whitened "
+        "closure error")
+    prune_xy_m: float = Field(
+        0.25, gt=0, description="after optimization, closures whose residual is more than "
+        "this (or prune_theta_rad) are dropped and the graph is optimized again")
+    prune_theta_rad: float = Field(float(np.radians(4.0)), gt=0,
+                                   description="see prune_xy_m")
 
 
 @dataclass
@@ -355,12 +396,12 @@ def correct_all(poses_xytheta: np.ndarray, keyframes: list[int],
 
 
 def build_graph(scans, odometry_poses_xytheta: np.ndarray, cfg: GraphConfig | None = None,
-                voxel_m: float = 0.05, progress: Callable[[int, int], None] | None = None):
+                progress: Callable[[int, int], None] | None = None):
     """Keyframes from scan-matching odometry (N, 3), loop closures, optimization; returns
     (all scan poses (N, 3) after optimization, GraphResult)."""
     cfg = cfg or GraphConfig()
     keys = select_keyframes(odometry_poses_xytheta, cfg)
-    pts = [voxel_downsample(scans[i].points_base_xy(), voxel_m) for i in keys]
+    pts = [voxel_downsample(scans[i].points_base_xy(), cfg.keyframe_voxel_m) for i in keys]
     res = optimize(odometry_poses_xytheta[keys], pts, cfg, progress=progress)
     res.keyframes = keys
     return correct_all(odometry_poses_xytheta, keys, res.poses_xytheta), res

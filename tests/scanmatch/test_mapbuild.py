@@ -170,30 +170,114 @@ def test_scans_with_too_few_points_fall_back_to_odometry_and_are_counted():
     assert err.max() < 0.05  # odometry (exact here) carried the blinded scans
 
 
-def test_map_build_command_on_a_simulated_carmen_log(tmp_path):
-    from gatmo.cli import main
+@pytest.fixture(scope="module")
+def office_log(tmp_path_factory):
+    """A 20 s simulated office run as a CARMEN log, and its scans (with the truth)."""
     from gatmo.datasets.carmen import write_carmen
     from gatmo.datasets.sim import SimConfig, make_world, simulate_run
-    from gatmo.datasets.tum import read_tum
-    from gatmo.maps.io import load_map
 
     rng = np.random.default_rng(7)
     cfg = SimConfig.for_preset("office")
     cfg.robot.duration_s = 20
     world, route = make_world("office", rng)
     scans = simulate_run(world, route, cfg, rng)
-    log = write_carmen(tmp_path / "run.clf", scans)
+    return write_carmen(tmp_path_factory.mktemp("office") / "run.clf", scans), scans
+
+
+def test_map_build_command_on_a_simulated_carmen_log(tmp_path, office_log):
+    from gatmo.cli import main
+    from gatmo.datasets.tum import read_tum
+    from gatmo.maps.io import load_map
+
+    log, scans = office_log
     rc = main(["map", "build", str(log), "--out", str(tmp_path / "m.yaml"), "--poses-out",
-               str(tmp_path / "p.tum"), "--resolution", "0.1"])
+               str(tmp_path / "p.tum"), "--odometry-out", str(tmp_path / "o.tum"),
+               "--resolution", "0.1"])
     assert rc == 0
     grid = load_map(tmp_path / "m.yaml")
     assert grid.resolution_m == pytest.approx(0.1) and grid.occupied.sum() > 100
-    t, poses = read_tum(tmp_path / "p.tum")
     gt = np.array([s.gt_pose_xytheta for s in scans])
-    assert len(poses) == len(scans)
-    # the trajectory (first scan's frame) matches the truth's shape
     ref = np.array([relative(gt[0], q) for q in gt])
-    assert np.hypot(*(poses[:, :2] - ref[:, :2]).T).max() < 0.3
+    # both trajectories (first scan's frame) match the truth's shape
+    for name in ("p.tum", "o.tum"):
+        t, poses = read_tum(tmp_path / name)
+        assert len(poses) == len(scans)
+        assert np.hypot(*(poses[:, :2] - ref[:, :2]).T).max() < 0.3
+
+
+def test_a_map_is_built_again_to_the_byte_from_the_configuration_saved_beside_it(
+        tmp_path, office_log, capsys):
+    """``MAP.build.yaml`` holds every parameter the map was built with, flags included: a
+    second build from it alone gives the same image."""
+    from gatmo.cli import main
+    from gatmo.pipeline.config import MapBuildConfig, load_map_build_config
+
+    log, _ = office_log
+    first = tmp_path / "a" / "m.yaml"
+    first.parent.mkdir()
+    tuned = tmp_path / "tuned.yaml"
+    assert main(["config", "dump", "mapping"]) == 0
+    text = capsys.readouterr().out.replace("keyframe_dist_m: 0.5", "keyframe_dist_m: 0.8")
+    tuned.write_text(text)
+    assert main(["map", "build", str(log), "--out", str(first), "--config", str(tuned),
+                 "--max-range", "6"]) == 0
+    saved = load_map_build_config(tmp_path / "a" / "m.build.yaml")
+    expect = MapBuildConfig()
+    expect.graph.keyframe_dist_m = 0.8
+    expect.render.max_range_m = 6.0
+    assert saved == expect
+    second = tmp_path / "b" / "m.yaml"
+    second.parent.mkdir()
+    assert main(["map", "build", str(log), "--out", str(second), "--config",
+                 str(tmp_path / "a" / "m.build.yaml")]) == 0
+    assert (tmp_path / "b" / "m.pgm").read_bytes() == (tmp_path / "a" / "m.pgm").read_bytes()
+    # and `gatmo info` tells the file for what it is
+    from gatmo.datasets.info import summarize
+
+    info = summarize(tmp_path / "a" / "m.build.yaml")
+    assert info["kind"] == "map build config" and info["parameters_not_defaults"] == 2
+
+
+def test_the_map_build_configuration_changes_what_is_built(tmp_path, office_log):
+    from gatmo.maps.io import load_map
+    from gatmo.pipeline.config import MapBuildConfig
+    from gatmo.pipeline.mapping import build_map
+
+    log, _ = office_log
+    base = build_map(log, tmp_path / "base.yaml")
+    cfg = MapBuildConfig()
+    cfg.graph.keyframe_dist_m = 1.5  # fewer graph nodes
+    cfg.render.occupied_thresh = 0.9  # a cell needs about three hits, not one
+    cfg.render.resolution_m = 0.1
+    tuned = build_map(log, tmp_path / "tuned.yaml", cfg=cfg)
+    assert tuned.keyframes < 0.7 * base.keyframes
+    a, b = load_map(tmp_path / "base.yaml"), load_map(tmp_path / "tuned.yaml")
+    assert b.resolution_m == pytest.approx(0.1)
+    # occupied area [m^2]: fewer cells pass the higher threshold, though each is 4x larger
+    assert b.occupied.sum() * 0.01 < 0.9 * a.occupied.sum() * 0.0025 * 4
+    assert cfg == MapBuildConfig.model_validate(cfg.model_dump())  # the caller's is untouched
+    assert build_map(log, tmp_path / "x.yaml", cfg=cfg, resolution_m=0.2).resolution_m == 0.2
+    assert cfg.render.resolution_m == 0.1
+
+
+def test_a_bad_map_build_configuration_is_one_line_and_nothing_is_written(
+        tmp_path, office_log, capsys):
+    from gatmo.cli import main
+
+    log, _ = office_log
+    bad = tmp_path / "bad.yaml"
+    for text, where in (("graph:\n  keyframe_dist_m: 0.5\n  closure_windw: 3\n",
+                         ":3: graph.closure_windw: unknown key"),
+                        ("render:\n  free_thresh: 0.7\n",
+                         ":1: render: free_thresh (0.7) must be below occupied_thresh (0.65)"),
+                        ("icp:\n  voxel_m: -1\n", ":2: icp.voxel_m: Input should be greater")):
+        bad.write_text(text)
+        assert main(["map", "build", str(log), "--out", str(tmp_path / "m.yaml"), "--config",
+                     str(bad)]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"error: {bad}{where}"), err
+        assert len(err.splitlines()) == 1
+        assert not (tmp_path / "m.yaml").exists() and not (tmp_path / "m.build.yaml").exists()
 
 
 @pytest.mark.slow
