@@ -486,15 +486,23 @@ def config_dump(
 def map_render(
     log: Annotated[Path, typer.Argument(help="Log with reference poses (e.g. *-corrected.log).")],
     out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it).")],
-    resolution: Annotated[float, typer.Option(help="Cell size [m].")] = 0.05,
-    max_range: Annotated[float, typer.Option(help="Use returns up to this range [m].")] = 20.0,
+    config: Annotated[
+        Path | None, typer.Option("--config", help="Map-build configuration YAML: its render "
+                                  "section (cell size, range, log-odds, thresholds).")
+    ] = None,
+    resolution: Annotated[float | None, typer.Option(
+        help="Cell size [m]; replaces render.resolution_m (0.05).")] = None,
+    max_range: Annotated[float | None, typer.Option(
+        help="Use returns up to this range [m]; replaces render.max_range_m (20).")] = None,
     fmt: FormatOpt = None,
 ) -> None:
     """Render an occupancy map from a log whose poses are known (log-odds, map_server output)."""
+    from gatmo.pipeline.config import load_map_build_config
     from gatmo.pipeline.mapping import render_reference_map
 
+    cfg = load_map_build_config(config).render
     summary = render_reference_map(log, out, resolution_m=resolution, max_range_m=max_range,
-                                   fmt=fmt)
+                                   fmt=fmt, cfg=cfg)
     _print_mapping("map render", summary.as_dict())
 
 

@@ -28,11 +28,15 @@ class RenderSummary:
         return dict(self.__dict__)
 
 
-def render_reference_map(log: str | Path, out_yaml: str | Path, *, resolution_m: float = 0.05,
-                         max_range_m: float = 20.0, fmt: str | None = None,
-                         image_format: str = "pgm") -> RenderSummary:
+def render_reference_map(log: str | Path, out_yaml: str | Path, *,
+                         resolution_m: float | None = None, max_range_m: float | None = None,
+                         fmt: str | None = None, image_format: str = "pgm",
+                         cfg=None) -> RenderSummary:
     """Render ``log`` at its reference poses (CARMEN pose fields, or ground truth) into a
-    map_server map. Records that are bad or out of order are skipped and counted."""
+    map_server map. Records that are bad or out of order are skipped and counted.
+
+    ``cfg``: a :class:`~gatmo.maps.mapping.RenderConfig` (defaults when None);
+    ``resolution_m`` / ``max_range_m`` replace its fields."""
     from gatmo.datasets.open import open_log, sniff_format
     from gatmo.maps.io import save_map
     from gatmo.maps.mapping import render_map
@@ -44,10 +48,23 @@ def render_reference_map(log: str | Path, out_yaml: str | Path, *, resolution_m:
     if not scans:
         raise DataError("no scan carries a reference pose to map with", file=log)
     poses = np.array([s.gt_pose_xytheta for s in scans])
-    grid = render_map(scans, poses, resolution_m=resolution_m, max_range_m=max_range_m)
+    cfg = _render_config(cfg, resolution_m, max_range_m)
+    grid = render_map(scans, poses, **cfg.model_dump())
     save_map(grid, out_yaml, image_format=image_format)
     return RenderSummary(len(scans), src.stats.skipped, f"{grid.width} x {grid.height}",
-                         resolution_m, int(grid.occupied.sum()), str(out_yaml))
+                         cfg.resolution_m, int(grid.occupied.sum()), str(out_yaml))
+
+
+def _render_config(cfg, resolution_m: float | None, max_range_m: float | None):
+    """A copy of ``cfg`` (a RenderConfig, defaults when None) with the given fields replaced."""
+    from gatmo.maps.mapping import RenderConfig
+
+    cfg = (cfg or RenderConfig()).model_copy(deep=True)
+    if resolution_m is not None:
+        cfg.resolution_m = resolution_m
+    if max_range_m is not None:
+        cfg.max_range_m = max_range_m
+    return cfg
 
 
 @dataclass
@@ -132,10 +149,7 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
 
     t0 = time.perf_counter()
     cfg = (cfg or MapBuildConfig()).model_copy(deep=True)
-    if resolution_m is not None:
-        cfg.render.resolution_m = resolution_m
-    if max_range_m is not None:
-        cfg.render.max_range_m = max_range_m
+    cfg.render = _render_config(cfg.render, resolution_m, max_range_m)
     src = open_log(log, fmt=fmt, skip_bad=True)
     scans = []
     for s in src:

@@ -295,6 +295,21 @@ def test_map_render_from_known_poses(scen, tmp_path):
     occ = m.occupied_cells_world()
     assert len(occ) > 100
     assert np.mean(truth.value_at(occ) != 0) > 0.6  # mostly on mapped or moved things
+    # the render section of a map-build configuration applies; --resolution replaces its cell
+    cfg = tmp_path / "build.yaml"
+    cfg.write_text("render:\n  occupied_thresh: 0.95\n")
+    strict = tmp_path / "strict.yaml"
+    assert main(["map", "render", str(scen.logs[0]), "--out", str(strict), "--config",
+                 str(cfg)]) == 0
+    # a cell needs about four hits more than misses, not one
+    assert load_map(strict).occupied.sum() < 0.9 * m.occupied.sum()
+    cfg.write_text("render:\n  resolution_m: 0.1\n")
+    assert main(["map", "render", str(scen.logs[0]), "--out", str(strict), "--config",
+                 str(cfg)]) == 0
+    assert load_map(strict).resolution_m == pytest.approx(0.1)
+    assert main(["map", "render", str(scen.logs[0]), "--out", str(strict), "--config",
+                 str(cfg), "--resolution", "0.2"]) == 0
+    assert load_map(strict).resolution_m == pytest.approx(0.2)
 
 
 def test_traces_keep_the_poses_gatmo_was_given(scen, tmp_path):
