@@ -2,7 +2,12 @@
 rotation deg) of raw odometry, our ICP odometry and KISS-ICP, and ms per scan of both matchers,
 in the same run. Skipped when ../shared/data is absent.
 
-    python -m benchmarks.bench_scanmatch [--max-scans N]
+    python -m benchmarks.bench_scanmatch [--max-scans N] [--draws K]
+
+``--draws K`` runs our ICP K times more, each with its Huber kernel scale nudged by k * 1e-12
+(relative): a draw of the rounding, as another BLAS kernel or CPU would give. One run's
+figure over a whole log can hinge on a few scans, so the spread of these draws is the
+figure's error bar.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--max-scans", type=int, default=None)
+    ap.add_argument("--draws", type=int, default=0)
     args = ap.parse_args(argv or [])
     if not DATA.exists():
         print(f"{DATA} not found: real data absent, nothing to measure")
@@ -45,6 +51,19 @@ def main(argv=None) -> int:
             poses = np.array([matcher.register(s).pose_xytheta for s in scans])
             ms = (time.perf_counter() - t0) * 1e3 / len(scans)
             res[label] = dict(relations_error(t, poses, rel), ms_per_scan=ms)
+        draws = []
+        for k in range(1, args.draws + 1):
+            matcher = ScanMatchOdometry(IcpConfig(kernel_scale_m=0.05 * (1 + k * 1e-12)))
+            poses = np.array([matcher.register(s).pose_xytheta for s in scans])
+            draws.append(dict(relations_error(t, poses, rel),
+                              fallback_bad_fit=matcher.stats["fallback_bad_fit"]))
+        if draws:
+            every = [res["ours"]] + draws
+            res["ours_draws"] = {
+                key: {"median": float(np.median([d[key] for d in every])),
+                      "min": float(min(d[key] for d in every)),
+                      "max": float(max(d[key] for d in every))}
+                for key in ("trans_mean_m", "rot_mean_deg")} | {"n": len(every)}
         out[name] = res
         print(name, json.dumps(res), flush=True)
     OUT.mkdir(exist_ok=True)

@@ -109,9 +109,13 @@ def test_odometry_that_stalls_or_spikes_is_followed_by_constant_velocity(glitch)
     xy, th, stats = final_error(IcpConfig())
     assert stats["velocity_guess"] >= 1 and stats["icp"] == len(scans) - 1
     assert xy < 0.03 and np.degrees(th) < 0.5
-    # never treated as a jump (thresholds out of reach), the glitch stays in the trajectory
-    xy_off, th_off, _ = final_error(IcpConfig(odom_jump_m=100.0, odom_jump_rad=100.0))
-    assert xy_off > 0.3 or np.degrees(th_off) > 5  # 1.4 m / 28 deg measured, both
+    # never treated as a jump (thresholds out of reach): ICP from the glitched odometry fails,
+    # and constant velocity, tried where it fails, still recovers the step (the glitch stayed
+    # in the trajectory, 1.4 m / 28 deg, before that retry: sixty-seventh session)
+    xy_off, th_off, st = final_error(IcpConfig(odom_jump_m=100.0, odom_jump_rad=100.0))
+    assert st["odom_jumps"] == 0 and st["velocity_guess"] >= 1
+    assert st["fallback_bad_fit"] == 0 and st["icp"] == len(scans) - 1
+    assert xy_off < 0.03 and np.degrees(th_off) < 0.5
 
 def test_kiss_icp_backend_follows_a_simulated_run():
     from gatmo.datasets.sim import SimConfig, make_world, simulate_run

@@ -284,9 +284,11 @@ def test_a_bad_map_build_configuration_is_one_line_and_nothing_is_written(
 def test_icp_odometry_over_the_whole_mit_csail_log_survives_its_odometry_jumps():
     # MIT CSAIL's wheels stall and spike; ICP from such a guess can settle 9-20 deg off with a
     # passing fitness, and one such step spoils every long relation across it. At a jump ICP
-    # starts from both guesses and the lower residual wins: 0.264 m / 1.13 deg over all 1,172
-    # relations (0.827 m / 2.51 deg when constant velocity was tried only after a stall or a
-    # failed fit; README, "Scan matching")
+    # starts from both guesses and the lower residual wins; where ICP from the odometry fails,
+    # it starts from constant velocity. Without that retry the figure was a draw of rounding:
+    # 0.15-0.62 m over kernel scales 1e-12 apart (and 0.26 or 0.52 m by which OpenBLAS kernel
+    # numpy ran), from 0-6 scans of a stalled turn falling back to the wheels; with it
+    # 0.14-0.19 m, none falling back (README, "Scan matching").
     bag = DATA / "mit-csail.sort.bag"
     if not bag.exists():
         pytest.skip(f"{bag} not found: real data absent")
@@ -296,10 +298,13 @@ def test_icp_odometry_over_the_whole_mit_csail_log_survives_its_odometry_jumps()
     from gatmo.scanmatch import IcpConfig, ScanMatchOdometry
 
     scans = list(RosBag(bag))
-    odo = ScanMatchOdometry(IcpConfig())
-    poses = np.array([odo.register(s).pose_xytheta for s in scans])
-    e = relations_error(np.array([s.stamp_s for s in scans]), poses,
-                        read_relations(DATA / "mit-csail.relations"))
-    assert e["n_used"] == 1172
-    assert e["trans_mean_m"] < 0.4 and e["rot_mean_deg"] < 1.5
-    assert odo.stats["odom_jumps"] > 100 and odo.stats["velocity_guess"] > 20
+    rel = read_relations(DATA / "mit-csail.relations")
+    t = np.array([s.stamp_s for s in scans])
+    for nudge in (0.0, 2e-12, 5e-12):  # three draws of the rounding
+        odo = ScanMatchOdometry(IcpConfig(kernel_scale_m=0.05 * (1 + nudge)))
+        poses = np.array([odo.register(s).pose_xytheta for s in scans])
+        e = relations_error(t, poses, rel)
+        assert e["n_used"] == 1172
+        assert e["trans_mean_m"] < 0.3 and e["rot_mean_deg"] < 1.2, (nudge, e)
+        assert odo.stats["odom_jumps"] > 100 and odo.stats["velocity_guess"] > 20
+        assert odo.stats["fallback_bad_fit"] <= 1, (nudge, odo.stats)
