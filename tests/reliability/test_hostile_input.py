@@ -160,15 +160,18 @@ def test_objects_json(tmp_path, obj, version):
 
 @SETTINGS
 @given(fields=st.dictionaries(st.sampled_from(["amcl", "gatmo", "fusion", "icp", "seed",
-                                               "image", "laser_z_hit", "odom_alpha1", "bogus"]),
+                                               "image", "laser_z_hit", "odom_alpha1", "graph",
+                                               "render", "bogus"]),
                               YAML_VALUES | st.dictionaries(
                                   st.sampled_from(["ros__parameters", "alpha1", "z_hit",
-                                                   "laser_model", "passes", "bogus"]),
+                                                   "laser_model", "passes", "match",
+                                                   "free_thresh", "group_size", "bogus"]),
                                   YAML_VALUES | JSONISH, max_size=3), max_size=5),
        runs=JSONISH)
 def test_info_on_any_yaml_and_scenario_json(tmp_path, fields, runs):
-    # gatmo info tells a map, a stack config, an AMCL file, a scenario and an objects.json
-    # apart by their keys: whichever it takes a file for, the outcome is a summary or one line
+    # gatmo info tells a map, a stack config, a map-build config, an AMCL file, a scenario
+    # and an objects.json apart by their keys: whichever it takes a file for, the outcome is
+    # a summary or one line
     import yaml
 
     from gatmo.datasets.info import summarize
