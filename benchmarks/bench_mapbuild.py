@@ -93,7 +93,7 @@ def main(argv=None) -> int:
         icp, opt, res, odo_stats = build_trajectory(scans)
         t_graph = time.perf_counter() - t0
         t0 = time.perf_counter()
-        grid = render_map(scans, opt, resolution_m=0.05, max_range_m=20.0)
+        grid = render_map(scans, opt)
         t_render = time.perf_counter() - t0
         odom = np.array([s.odom_pose_xytheta for s in scans])
         r = {"scans": len(scans), "keyframes": len(res.keyframes),

@@ -51,14 +51,12 @@ def main(argv=None) -> int:
             poses = np.array([matcher.register(s).pose_xytheta for s in scans])
             ms = (time.perf_counter() - t0) * 1e3 / len(scans)
             res[label] = dict(relations_error(t, poses, rel), ms_per_scan=ms)
-        draws = []
+        every = [res["ours"]]
         for k in range(1, args.draws + 1):
             matcher = ScanMatchOdometry(IcpConfig(kernel_scale_m=0.05 * (1 + k * 1e-12)))
-            poses = np.array([matcher.register(s).pose_xytheta for s in scans])
-            draws.append(dict(relations_error(t, poses, rel),
-                              fallback_bad_fit=matcher.stats["fallback_bad_fit"]))
-        if draws:
-            every = [res["ours"]] + draws
+            every.append(relations_error(
+                t, np.array([matcher.register(s).pose_xytheta for s in scans]), rel))
+        if args.draws:
             res["ours_draws"] = {
                 key: {"median": float(np.median([d[key] for d in every])),
                       "min": float(min(d[key] for d in every)),

@@ -39,18 +39,18 @@ class RenderConfig(GatmoModel):
         return self
 
 
-def render_map(scans, poses_xytheta: np.ndarray, *, resolution_m: float = 0.05,
-               max_range_m: float = 20.0, l_occ: float = 0.85, l_free: float = -0.4,
-               l_clamp: float = 5.0, margin_m: float = 1.0, occupied_thresh: float = 0.65,
-               free_thresh: float = 0.196) -> OccupancyGrid:
+def render_map(scans, poses_xytheta: np.ndarray,
+               cfg: RenderConfig | None = None) -> OccupancyGrid:
     """Log-odds grid from scans (sequence of Scan) at base poses (N, 3) in the map frame.
 
-    Cells crossed by a beam get ``l_free``, the endpoint cell ``l_occ``; max-range and invalid
-    beams clear space up to ``max_range_m`` without an endpoint. The result is thresholded as
-    map_server would (p > ``occupied_thresh`` occupied, p < ``free_thresh`` free, else
-    unknown). The keywords are :class:`RenderConfig`'s fields: ``render_map(scans, poses,
-    **cfg.model_dump())``.
+    Cells crossed by a beam get ``cfg.l_free``, the endpoint cell ``cfg.l_occ``; max-range and
+    invalid beams clear space up to ``cfg.max_range_m`` without an endpoint. The result is
+    thresholded as map_server would (p > ``occupied_thresh`` occupied, p < ``free_thresh``
+    free, else unknown). ``cfg``: :class:`RenderConfig` (defaults when None).
     """
+    cfg = cfg or RenderConfig()
+    resolution_m, max_range_m, margin_m = cfg.resolution_m, cfg.max_range_m, cfg.margin_m
+    l_occ, l_free, l_clamp = cfg.l_occ, cfg.l_free, cfg.l_clamp
     poses = np.asarray(poses_xytheta, dtype=float)
     lo = poses[:, :2].min(axis=0) - max_range_m - margin_m
     hi = poses[:, :2].max(axis=0) + max_range_m + margin_m
@@ -80,6 +80,6 @@ def render_map(scans, poses_xytheta: np.ndarray, *, resolution_m: float = 0.05,
         np.clip(logodds, -l_clamp, l_clamp, out=logodds)
     p = 1.0 - 1.0 / (1.0 + np.exp(logodds))
     cells = np.full(logodds.shape, UNKNOWN, dtype=np.int8)
-    cells[touched & (p > occupied_thresh)] = OCCUPIED
-    cells[touched & (p < free_thresh)] = FREE
+    cells[touched & (p > cfg.occupied_thresh)] = OCCUPIED
+    cells[touched & (p < cfg.free_thresh)] = FREE
     return OccupancyGrid(cells, resolution_m, (lo[0], lo[1], 0.0))

@@ -49,7 +49,7 @@ def render_reference_map(log: str | Path, out_yaml: str | Path, *,
         raise DataError("no scan carries a reference pose to map with", file=log)
     poses = np.array([s.gt_pose_xytheta for s in scans])
     cfg = _render_config(cfg, resolution_m, max_range_m)
-    grid = render_map(scans, poses, **cfg.model_dump())
+    grid = render_map(scans, poses, cfg)
     save_map(grid, out_yaml, image_format=image_format)
     return RenderSummary(len(scans), src.stats.skipped, f"{grid.width} x {grid.height}",
                          cfg.resolution_m, int(grid.occupied.sum()), str(out_yaml))
@@ -148,8 +148,8 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
     from gatmo.pipeline.config import MapBuildConfig
 
     t0 = time.perf_counter()
-    cfg = (cfg or MapBuildConfig()).model_copy(deep=True)
-    cfg.render = _render_config(cfg.render, resolution_m, max_range_m)
+    cfg = cfg or MapBuildConfig()
+    cfg = cfg.model_copy(update={"render": _render_config(cfg.render, resolution_m, max_range_m)})
     src = open_log(log, fmt=fmt, skip_bad=True)
     scans = []
     for s in src:
@@ -160,7 +160,7 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
         raise DataError(f"{len(scans)} scans: too few to build a map", file=log)
     odometry, poses, res, odo_stats = build_trajectory(scans, icp_cfg=cfg.icp,
                                                        graph_cfg=cfg.graph, progress=progress)
-    grid = render_map(scans, poses, **cfg.render.model_dump())
+    grid = render_map(scans, poses, cfg.render)
     save_map(grid, out_yaml, image_format=image_format)
     config_out = build_config_path(out_yaml)
     atomic_write_text(config_out, dump_model(cfg, comments=True))

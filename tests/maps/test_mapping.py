@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gatmo.maps.mapping import render_map
+from gatmo.maps.mapping import RenderConfig, render_map
 from tests.helpers import make_scan, room_grid
 
 
@@ -13,7 +13,7 @@ def test_render_map_of_a_room_matches_the_room():
     poses = np.array([[1.5, 1.5, 0.3], [6.0, 4.5, 2.5], [1.5, 4.5, -0.8], [6.5, 1.2, 2.0]])
     scans = [make_scan(g, p, n_beams=721, fov_rad=2 * np.pi * 0.999, max_range_m=12)
              for p in poses]
-    m = render_map(scans, poses, resolution_m=0.05, max_range_m=12)
+    m = render_map(scans, poses, RenderConfig(max_range_m=12))
     occ = m.occupied_cells_world()
     truth = g.value_at(occ)
     assert np.mean(truth == 100) > 0.95  # what the map calls occupied is occupied
