@@ -1,11 +1,12 @@
 """Scan matching on the Kümmerle benchmark logs: relations error (mean ± std, translation m and
-rotation deg) of raw odometry, our ICP odometry and KISS-ICP, and ms per scan of both matchers,
-in the same run. Skipped when ../shared/data is absent.
+rotation deg) of raw odometry, our ICP odometry (with the wheels, and from scans alone as
+KISS-ICP) and KISS-ICP, and ms per scan of the matchers, in the same run. Skipped when
+../shared/data is absent.
 
     python -m benchmarks.bench_scanmatch [--max-scans N] [--draws K]
 
-``--draws K`` runs our ICP K times more, each with its Huber kernel scale nudged by k * 1e-12
-(relative): a draw of the rounding, as another BLAS kernel or CPU would give. One run's
+``--draws K`` runs our ICP (both ways) K times more, each with its Huber kernel scale nudged
+by k * 1e-12 (relative): a draw of the rounding, as another BLAS kernel or CPU would give. One run's
 figure over a whole log can hinge on a few scans, so the spread of these draws is the
 figure's error bar.
 """
@@ -46,22 +47,27 @@ def main(argv=None) -> int:
         odom = np.array([s.odom_pose_xytheta for s in scans])
         res["odometry"] = relations_error(t, odom, rel)
         for label, matcher in (("ours", ScanMatchOdometry(IcpConfig())),
+                               ("ours_scans_alone",
+                                ScanMatchOdometry(IcpConfig(use_odometry=False))),
                                ("kiss_icp", KissIcpBackend())):
             t0 = time.perf_counter()
             poses = np.array([matcher.register(s).pose_xytheta for s in scans])
             ms = (time.perf_counter() - t0) * 1e3 / len(scans)
-            res[label] = dict(relations_error(t, poses, rel), ms_per_scan=ms)
-        every = [res["ours"]]
-        for k in range(1, args.draws + 1):
-            matcher = ScanMatchOdometry(IcpConfig(kernel_scale_m=0.05 * (1 + k * 1e-12)))
-            every.append(relations_error(
-                t, np.array([matcher.register(s).pose_xytheta for s in scans]), rel))
-        if args.draws:
-            res["ours_draws"] = {
-                key: {"median": float(np.median([d[key] for d in every])),
-                      "min": float(min(d[key] for d in every)),
-                      "max": float(max(d[key] for d in every))}
-                for key in ("trans_mean_m", "rot_mean_deg")} | {"n": len(every)}
+            res[label] = dict(relations_error(t, poses, rel), ms_per_scan=ms,
+                              rescued=matcher.stats.get("rescued", 0))
+        for label, use_odometry in (("ours", True), ("ours_scans_alone", False)):
+            every = [res[label]]
+            for k in range(1, args.draws + 1):
+                matcher = ScanMatchOdometry(IcpConfig(kernel_scale_m=0.05 * (1 + k * 1e-12),
+                                                      use_odometry=use_odometry))
+                every.append(relations_error(
+                    t, np.array([matcher.register(s).pose_xytheta for s in scans]), rel))
+            if args.draws:
+                res[f"{label}_draws"] = {
+                    key: {"median": float(np.median([d[key] for d in every])),
+                          "min": float(min(d[key] for d in every)),
+                          "max": float(max(d[key] for d in every))}
+                    for key in ("trans_mean_m", "rot_mean_deg")} | {"n": len(every)}
         out[name] = res
         print(name, json.dumps(res), flush=True)
     OUT.mkdir(exist_ok=True)

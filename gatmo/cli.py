@@ -509,7 +509,8 @@ def map_render(
 # ---------------------------------------------------------------------- map build
 @map_app.command("build")
 def map_build(
-    log: Annotated[Path, typer.Argument(help="Raw log or bag with scans and odometry.")],
+    log: Annotated[Path, typer.Argument(help="Raw log or bag: scans, and odometry if it has "
+                                        "any.")],
     out: Annotated[Path, typer.Option("--out", help="Output map YAML (image beside it; the "
                                       "configuration used beside it as MAP.build.yaml).")],
     poses_out: Annotated[
@@ -529,15 +530,22 @@ def map_build(
     max_range: Annotated[float | None, typer.Option(
         help="Use returns up to this range [m]; replaces render.max_range_m (20).")] = None,
     max_scans: Annotated[int | None, typer.Option(help="Stop after this many scans.")] = None,
+    no_odometry: Annotated[bool, typer.Option(
+        "--no-odometry", help="Ignore the log's wheel odometry: scan matching from constant "
+        "velocity alone, as KISS-ICP (sets icp.use_odometry false). A bag without odometry "
+        "is matched so anyway.")] = False,
     fmt: FormatOpt = None,
 ) -> None:
     """Build a map from a raw log (scan matching, loop closures, gtsam pose graph).
 
-    The occupancy grid is ray traced (log-odds) at the optimized poses; a map_server map."""
+    The occupancy grid is ray traced (log-odds) at the optimized poses; a map_server map.
+    A ROS bag with scans alone (no odometry) is matched from constant velocity."""
     from gatmo.pipeline.config import load_map_build_config
     from gatmo.pipeline.mapping import build_map
 
     cfg = load_map_build_config(config)
+    if no_odometry:
+        cfg = cfg.model_copy(update={"icp": cfg.icp.model_copy(update={"use_odometry": False})})
     bar, update = _progress("map build")
     with bar:
         summary = build_map(log, out, cfg=cfg, poses_out=poses_out, odometry_out=odometry_out,

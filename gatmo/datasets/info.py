@@ -154,11 +154,14 @@ def summarize(path: str | Path, fmt: str | None = None) -> dict:
     from gatmo.datasets.open import open_log, sniff_format
 
     fmt = fmt or sniff_format(p)
-    src = open_log(p, fmt=fmt, skip_bad=True)  # report bad records instead of stopping
+    # report bad records instead of stopping; a laser-only bag is described, not refused
+    kw = {"require_odometry": False} if fmt == "rosbag" else {}
+    src = open_log(p, fmt=fmt, skip_bad=True, **kw)
     stamps, odom, beams, fov, max_range, gt = [], [], None, None, None, 0
     for s in src:
         stamps.append(s.stamp_s)
-        odom.append(s.odom_pose_xytheta)
+        if s.odom_pose_xytheta is not None:
+            odom.append(s.odom_pose_xytheta)
         gt += s.gt_pose_xytheta is not None
         if beams is None:
             beams = s.num_beams
@@ -173,6 +176,7 @@ def summarize(path: str | Path, fmt: str | None = None) -> dict:
         "max_range_m": max_range,
         "duration_s": float(stamps[-1] - stamps[0]) if stamps else 0.0,
         "odom_path_m": path_length_m(np.array(odom)) if odom else 0.0,
+        "has_odometry": bool(odom),
         "has_ground_truth": gt > 0,
         "skipped": src.stats.skipped,
     }

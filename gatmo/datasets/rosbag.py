@@ -55,14 +55,22 @@ class RosBag:
     ``frame_id`` up to the base frame); ``laser_pose_xytheta`` overrides it. A bag without that
     transform is refused unless ``skip_bad`` (then the laser is put at the base origin and the
     fact counted in ``stats``).
+
+    A bag without odometry is refused unless ``require_odometry`` is False: then its scans
+    carry ``odom_pose_xytheta = None`` (``has_odometry`` says so after an iteration), and the
+    base frame is the top of the laser's transform chain, or the laser's own frame where the
+    bag has no transforms (what scan matching alone, as KISS-ICP, needs).
     """
 
     def __init__(self, path: str | Path, *, scan_topic: str | None = None,
                  odom_topic: str | None = None, gt_topic: str | None = None,
-                 skip_bad: bool = False, laser_pose_xytheta=None) -> None:
+                 skip_bad: bool = False, laser_pose_xytheta=None,
+                 require_odometry: bool = True) -> None:
         self.path = str(path)
         self.scan_topic, self.odom_topic, self.gt_topic = scan_topic, odom_topic, gt_topic
         self.skip_bad = skip_bad
+        self.require_odometry = require_odometry
+        self.has_odometry: bool | None = None  # known after an iteration
         self.laser_pose_xytheta = (None if laser_pose_xytheta is None
                                    else np.asarray(laser_pose_xytheta, dtype=float))
         self.stats = ReadStats()
@@ -226,8 +234,9 @@ class RosBag:
             edges.setdefault(child, (parent, pose))
         if odom_c is None:
             odom = tf_odom
-        if not odom:
+        if not odom and (self.require_odometry or odom_c is not None):
             raise FormatError("no odometry: neither a nav_msgs/Odometry topic nor /tf odom->base"
+                              " (gatmo map build runs on scans alone)"
                               if odom_c is None and not tf_odom else
                               f"no readable odometry on {odom_c.topic}", file=self.path)
         if not scans_raw:
@@ -238,6 +247,8 @@ class RosBag:
         laser_pose = self.laser_pose_xytheta
         if laser_pose is None:
             laser_pose = self._laser_pose(scan_frame, base_frame, edges)
+        if laser_pose is None and not odom and scan_frame not in edges:
+            laser_pose = np.zeros(3)  # no odometry, no transforms: the laser is the base
         if laser_pose is None:
             msg = (f"no transform from the laser frame '{scan_frame}' to the base frame "
                    f"'{base_frame or '?'}' in /tf or /tf_static; give laser_pose_xytheta")
@@ -245,11 +256,12 @@ class RosBag:
                 raise FormatError(msg, file=self.path, field="tf")
             stats.skip(f"tf: {msg}; laser put at the base origin")
             laser_pose = np.zeros(3)
+        self.has_odometry = bool(odom)
         odom_t = np.array([o[0] for o in odom])
         odom_p = np.array([o[1] for o in odom]).reshape(-1, 3)
         order = np.argsort(odom_t, kind="stable")
         odom_t, odom_p = odom_t[order], odom_p[order]
-        keep = np.concatenate([[True], np.diff(odom_t) > 0])
+        keep = np.concatenate([[True], np.diff(odom_t) > 0])[:len(odom_t)]
         odom_t, odom_p = odom_t[keep], odom_p[keep]
         gt_t = np.array([g[0] for g in gt])
         gt_p = np.array([g[1] for g in gt]).reshape(-1, 3)
@@ -257,8 +269,12 @@ class RosBag:
             order = np.argsort(gt_t, kind="stable")
             gt_t, gt_p = gt_t[order], gt_p[order]
         stamps = np.array([s[0] for _, s in scans_raw])
-        odom_at = interpolate_poses(odom_t, odom_p, stamps) if len(odom_t) > 1 else \
-            np.repeat(odom_p[:1], len(stamps), axis=0)
+        if not odom:
+            odom_at = [None] * len(stamps)
+        elif len(odom_t) > 1:
+            odom_at = interpolate_poses(odom_t, odom_p, stamps)
+        else:
+            odom_at = np.repeat(odom_p[:1], len(stamps), axis=0)
         gt_at = interpolate_poses(gt_t, gt_p, stamps) if len(gt_t) > 1 else None
         last = -np.inf
         for k, (i, (t, ranges, a0, da, rmin, rmax, _)) in enumerate(scans_raw):
@@ -339,14 +355,15 @@ def _write_bag(writer, ts, scans: list[Scan], *, ros1: bool, scan_topic, odom_to
     kw = {"latching": 1} if ros1 else {}
     ctf = writer.add_connection("/tf_static", TF, typestore=ts, **kw) if laser_tf else None
     cs = writer.add_connection(scan_topic, SCAN, typestore=ts)
-    co = writer.add_connection(odom_topic, ODOM, typestore=ts)
+    co = writer.add_connection(odom_topic, ODOM, typestore=ts) if odom_topic else None
     cg = writer.add_connection(gt_topic, ODOM, typestore=ts) if gt_topic else None
     for k, s in enumerate(scans):
         ns = int(round(s.stamp_s * 1e9))
         if k == 0 and ctf is not None:
             writer.write(ctf, ns, serialize(tf_msg(s), TF))
-        writer.write(co, ns, serialize(odom_msg(s.stamp_s, s.odom_pose_xytheta, "odom",
-                                                "base_link"), ODOM))
+        if co is not None and s.odom_pose_xytheta is not None:
+            writer.write(co, ns, serialize(odom_msg(s.stamp_s, s.odom_pose_xytheta, "odom",
+                                                    "base_link"), ODOM))
         writer.write(cs, ns, serialize(scan_msg(s), SCAN))
         if cg is not None and s.gt_pose_xytheta is not None:
             writer.write(cg, ns, serialize(odom_msg(s.stamp_s, s.gt_pose_xytheta, "map",
@@ -365,11 +382,12 @@ def check_ros2_storage(storage: str, field: str = "storage") -> None:
 
 
 def write_ros2_bag(path: str | Path, scans: Iterable[Scan], *, scan_topic: str = "/scan",
-                   odom_topic: str = "/odom", gt_topic: str | None = None,
+                   odom_topic: str | None = "/odom", gt_topic: str | None = None,
                    laser_tf: bool = True, storage: str = "sqlite3") -> Path:
     """Write scans as a ROS 2 bag folder (``storage``: sqlite3 or mcap): LaserScan, Odometry
-    (odom -> base_link), optional ground-truth Odometry, and base_link -> laser on /tf_static
-    (the first scan's ``laser_pose_xytheta``) unless ``laser_tf`` is False."""
+    (odom -> base_link; none when ``odom_topic`` is None: a laser-only bag), optional
+    ground-truth Odometry, and base_link -> laser on /tf_static (the first scan's
+    ``laser_pose_xytheta``) unless ``laser_tf`` is False."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -384,7 +402,7 @@ def write_ros2_bag(path: str | Path, scans: Iterable[Scan], *, scan_topic: str =
 
 
 def write_ros1_bag(path: str | Path, scans: Iterable[Scan], *, scan_topic: str = "/scan",
-                   odom_topic: str = "/odom", gt_topic: str | None = None,
+                   odom_topic: str | None = "/odom", gt_topic: str | None = None,
                    laser_tf: bool = True) -> Path:
     """Write scans as a ROS 1 ``.bag`` with the same topics as :func:`write_ros2_bag`."""
     from rosbags.rosbag1 import Writer

@@ -21,7 +21,9 @@ class Scan:
         ranges_m: (B,) measured ranges [m]; invalid ones are kept as read and flagged by ``valid``.
         angles_rad: (B,) beam angles in the laser frame [rad], counter-clockwise, 0 = laser x axis.
         range_min_m, range_max_m: sensor limits [m].
-        odom_pose_xytheta: (3,) pose of the robot base in the odometry frame at ``stamp_s``.
+        odom_pose_xytheta: (3,) pose of the robot base in the odometry frame at ``stamp_s``;
+            None only from a reader asked for scans without odometry (a laser-only bag read
+            for ``gatmo map build``), never from the default readers.
         laser_pose_xytheta: (3,) pose of the laser in the robot base frame.
         gt_pose_xytheta: (3,) ground-truth (or reference) base pose in the map frame, if known.
     """
@@ -31,14 +33,15 @@ class Scan:
     angles_rad: np.ndarray
     range_min_m: float
     range_max_m: float
-    odom_pose_xytheta: np.ndarray
+    odom_pose_xytheta: np.ndarray | None
     laser_pose_xytheta: np.ndarray = field(default_factory=lambda: np.zeros(3))
     gt_pose_xytheta: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.ranges_m = np.asarray(self.ranges_m, dtype=np.float64)
         self.angles_rad = np.asarray(self.angles_rad, dtype=np.float64)
-        self.odom_pose_xytheta = np.asarray(self.odom_pose_xytheta, dtype=np.float64)
+        if self.odom_pose_xytheta is not None:
+            self.odom_pose_xytheta = np.asarray(self.odom_pose_xytheta, dtype=np.float64)
         self.laser_pose_xytheta = np.asarray(self.laser_pose_xytheta, dtype=np.float64)
         if self.gt_pose_xytheta is not None:
             self.gt_pose_xytheta = np.asarray(self.gt_pose_xytheta, dtype=np.float64)

@@ -71,7 +71,9 @@ def _render_config(cfg, resolution_m: float | None, max_range_m: float | None):
 class BuildSummary:
     scans: int
     skipped_records: int  # bad records the reader skipped
+    odometry: str  # what guided scan matching: wheels, or constant velocity (and why)
     few_points: int  # scans with too few valid points (odometry used instead of ICP)
+    rescued: int  # scans ICP failed on from every guess, placed by a correlative search
     keyframes: int
     closures_accepted: int
     closures_rejected: int  # failed the acceptance test
@@ -130,9 +132,10 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
               resolution_m: float | None = None, max_range_m: float | None = None,
               fmt: str | None = None, image_format: str = "pgm", max_scans: int | None = None,
               progress: Callable[[int, int], None] | None = None) -> BuildSummary:
-    """``gatmo map build``: a map_server map from a raw log (scans + odometry): scan-matching
-    odometry, loop closures, a gtsam pose graph, then log-odds ray tracing at the optimized
-    poses.
+    """``gatmo map build``: a map_server map from a raw log (scans, and odometry where the log
+    has it): scan-matching odometry, loop closures, a gtsam pose graph, then log-odds ray
+    tracing at the optimized poses. A bag without odometry (or ``cfg.icp.use_odometry``
+    False) is matched from constant velocity alone, as KISS-ICP.
 
     ``cfg``: a :class:`~gatmo.pipeline.config.MapBuildConfig` (defaults when None);
     ``resolution_m`` / ``max_range_m`` replace its ``render`` section's. The configuration used
@@ -141,7 +144,7 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
     odometry's (before loop closure); TUM, in the first scan's frame."""
     from gatmo._io import atomic_write_text
     from gatmo.config import dump_model
-    from gatmo.datasets.open import open_log
+    from gatmo.datasets.open import open_log, sniff_format
     from gatmo.datasets.tum import write_tum
     from gatmo.maps.io import save_map
     from gatmo.maps.mapping import render_map
@@ -150,7 +153,10 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
     t0 = time.perf_counter()
     cfg = cfg or MapBuildConfig()
     cfg = cfg.model_copy(update={"render": _render_config(cfg.render, resolution_m, max_range_m)})
-    src = open_log(log, fmt=fmt, skip_bad=True)
+    fmt = fmt or sniff_format(log)
+    # a laser-only bag is read without odometry (the other formats always carry it)
+    kw = {"require_odometry": False} if fmt == "rosbag" else {}
+    src = open_log(log, fmt=fmt, skip_bad=True, **kw)
     scans = []
     for s in src:
         scans.append(s)
@@ -172,9 +178,16 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
     if progress is not None:
         progress(2 * len(scans), 2 * len(scans))
     st = res.stats
+    if getattr(src, "has_odometry", True) is False:
+        guided = "none in the log: constant velocity"
+    elif not cfg.icp.use_odometry:
+        guided = "constant velocity (icp.use_odometry false)"
+    else:
+        guided = "wheels"
     return BuildSummary(
-        scans=len(scans), skipped_records=src.stats.skipped,
-        few_points=int(odo_stats.get("fallback_few_points", 0)), keyframes=len(res.keyframes),
+        scans=len(scans), skipped_records=src.stats.skipped, odometry=guided,
+        few_points=int(odo_stats.get("fallback_few_points", 0)),
+        rescued=int(odo_stats.get("rescued", 0)), keyframes=len(res.keyframes),
         closures_accepted=len(res.closures), closures_rejected=int(st.get("rejected", 0)),
         closures_unconfirmed=int(st.get("unconfirmed", 0)), closures_pruned=res.pruned,
         size_cells=f"{grid.width} x {grid.height}", resolution_m=cfg.render.resolution_m,

@@ -152,6 +152,40 @@ def test_rosbag_round_trip(tmp_path, storage):
     assert "/nope" in str(e.value) and "/scan" in str(e.value)
 
 
+@pytest.mark.parametrize("ros1", [False, True])
+def test_a_laser_only_bag_is_refused_unless_scans_alone_are_asked_for(tmp_path, ros1):
+    from gatmo.datasets.rosbag import RosBag, write_ros1_bag, write_ros2_bag
+
+    scans = _scans()
+    for s in scans:
+        s.laser_pose_xytheta = np.array([0.2, 0.0, 0.1])
+    write = write_ros1_bag if ros1 else write_ros2_bag
+    with_tf = write(tmp_path / ("a.bag" if ros1 else "a"), scans, odom_topic=None)
+    bare = write(tmp_path / ("b.bag" if ros1 else "b"), scans, odom_topic=None, laser_tf=False)
+    with pytest.raises(FormatError) as e:  # every command but map build needs the wheels
+        list(RosBag(with_tf))
+    assert "no odometry" in str(e.value) and "map build" in str(e.value)
+    src = RosBag(with_tf, require_odometry=False)
+    back = list(src)
+    assert src.has_odometry is False and len(back) == len(scans)
+    assert all(b.odom_pose_xytheta is None for b in back)
+    # base_link -> laser from /tf_static: the base frame is the top of the laser's chain
+    np.testing.assert_allclose(back[0].laser_pose_xytheta, [0.2, 0.0, 0.1], atol=1e-9)
+    np.testing.assert_allclose(back[3].ranges_m, scans[3].ranges_m, atol=1e-5)
+    # `gatmo info` describes it rather than refusing it
+    about = summarize(with_tf)
+    assert about["scans"] == len(scans) and about["has_odometry"] is False
+    # no transforms at all: the laser's frame is the base frame (as KISS-ICP takes it)
+    bare_back = list(RosBag(bare, require_odometry=False))
+    np.testing.assert_allclose(bare_back[0].laser_pose_xytheta, 0.0)
+    # a bag with odometry reads the same either way
+    write(tmp_path / ("c.bag" if ros1 else "c"), scans)
+    c = RosBag(tmp_path / ("c.bag" if ros1 else "c"), require_odometry=False)
+    np.testing.assert_allclose([s.odom_pose_xytheta for s in c],
+                               [s.odom_pose_xytheta for s in scans], atol=1e-9)
+    assert c.has_odometry is True
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "rel, scans, beams",

@@ -165,3 +165,73 @@ def test_pose_graph_closes_a_loop_and_a_wrong_closure_is_down_weighted():
     res_bad = optimize(odo, empty, cfg, extra_closures=good)
     err_clean = np.hypot(*(res_bad.poses_xytheta[:, :2] - truth[:, :2]).T).max()
     assert err_opt < err_clean + 0.2  # the wrong closure barely moves the solution
+
+
+def _room_with_boxes():
+    return room_grid(11, 8, 0.05, boxes=[(2, 2, 3, 2.6), (6, 5, 6.4, 6.5), (7, 1, 8.5, 1.3),
+                                         (3.5, 6, 4.5, 6.8), (9, 4, 9.5, 5)])
+
+
+def _end_error(scans, truth, cfg):
+    sm = ScanMatchOdometry.from_config(cfg)
+    poses = np.array([sm.register(s).pose_xytheta for s in scans])
+    e = relative(relative(poses[0], poses[-1]), relative(truth[0], truth[-1]))
+    return np.hypot(e[0], e[1]), np.degrees(abs(e[2])), sm.stats
+
+
+def test_scans_without_odometry_are_matched_from_constant_velocity_and_turn_seeds():
+    # a laser-only bag: a robot drives straight, then turns left and, between two scans,
+    # right (0.2 rad/scan each way). Constant velocity misses the start of the turn by 0.2 rad
+    # and the reversal by 0.4 rad; ICP from it fails there, and the extra headings find the
+    # turn
+    from tests.helpers import drive_scans
+
+    g = _room_with_boxes()
+    yaw = np.concatenate([np.zeros(8), np.cumsum(np.full(4, 0.2))])
+    yaw = np.concatenate([yaw, yaw[-1] - np.cumsum(np.full(4, 0.2))])
+    truth = np.column_stack([2.0 + 0.1 * np.arange(len(yaw)), 3.5 + 0.03 * np.arange(len(yaw)),
+                             yaw])
+    scans = drive_scans(g, truth, max_range_m=8.0)
+    for i, s in enumerate(scans):
+        s.stamp_s, s.odom_pose_xytheta = 0.2 * i, None
+    xy, deg, st = _end_error(scans, truth, IcpConfig(rescue=False))
+    assert st["no_odometry"] == len(scans) - 1 and st["heading_seed"] >= 1
+    assert st["fallback_bad_fit"] == 0 and st["icp"] == len(scans) - 1
+    assert xy < 0.03 and deg < 0.5
+    # without the extra headings the turn is lost (measured: 92 deg off at the end)
+    xy0, deg0, st0 = _end_error(scans, truth, IcpConfig(heading_seeds=0, rescue=False))
+    assert st0["fallback_bad_fit"] >= 1 and deg0 > 30
+    # wheels that are right and ignored (use_odometry false) give the same as none at all
+    with_wheels = drive_scans(g, truth, max_range_m=8.0)
+    for i, s in enumerate(with_wheels):
+        s.stamp_s = 0.2 * i
+    xy1, deg1, st1 = _end_error(with_wheels, truth, IcpConfig(use_odometry=False))
+    assert st1["no_odometry"] == len(scans) - 1
+    assert (xy1, deg1) == pytest.approx((xy, deg))
+
+
+@pytest.mark.parametrize("wheels", [True, False])
+def test_a_gap_in_the_log_is_bridged_by_the_correlative_rescue(wheels):
+    # ACES holds a 3 s gap over which the robot turned 84 deg; ICP from any nearby guess
+    # fails there. The rescue searches the local map (+-1 m, any heading) and places the scan;
+    # without it the pose follows the guess and the turn is lost for the rest of the run
+    from tests.helpers import drive_scans
+
+    g = _room_with_boxes()
+    truth = np.array([[2.0 + 0.1 * i, 3.5, 0.0] for i in range(12)]
+                     + [[3.3 + 0.1 * i, 3.6 + 0.1 * i, 1.4] for i in range(10)])
+    scans = drive_scans(g, truth, max_range_m=8.0)
+    for i, s in enumerate(scans):
+        s.stamp_s = 0.2 * i + (3.0 if i >= 12 else 0.0)
+        if wheels:  # the wheels slipped over the gap: they saw no turn
+            if i >= 12:
+                s.odom_pose_xytheta = compose(scans[11].odom_pose_xytheta,
+                                              relative(truth[12], truth[i]))
+        else:
+            s.odom_pose_xytheta = None
+    xy, deg, st = _end_error(scans, truth, IcpConfig())
+    assert st["rescued"] == 1 and st["fallback_bad_fit"] == 0
+    assert xy < 0.03 and deg < 0.5
+    xy0, deg0, st0 = _end_error(scans, truth, IcpConfig(rescue=False))
+    assert st0["fallback_bad_fit"] >= 1 and st0["rescued"] == 0
+    assert deg0 > 30
