@@ -155,8 +155,7 @@ def summarize(path: str | Path, fmt: str | None = None) -> dict:
 
     fmt = fmt or sniff_format(p)
     # report bad records instead of stopping; a laser-only bag is described, not refused
-    kw = {"require_odometry": False} if fmt == "rosbag" else {}
-    src = open_log(p, fmt=fmt, skip_bad=True, **kw)
+    src = open_log(p, fmt=fmt, skip_bad=True, odometry_optional=True)
     stamps, odom, beams, fov, max_range, gt = [], [], None, None, None, 0
     for s in src:
         stamps.append(s.stamp_s)

@@ -39,9 +39,15 @@ def sniff_format(path: str | Path) -> str:
     raise FormatError(f"unknown log format; use --format {' | '.join(FORMATS)}", file=p)
 
 
-def open_log(path: str | Path, fmt: str | None = None, **kw):
-    """A ScanSource for ``path``: a CARMEN log, a ROS 1/2 bag, or a CMU Wean log."""
+def open_log(path: str | Path, fmt: str | None = None, *, odometry_optional: bool = False,
+             **kw):
+    """A ScanSource for ``path``: a CARMEN log, a ROS 1/2 bag, or a CMU Wean log.
+
+    ``odometry_optional``: a ROS bag without odometry is read (scans carry
+    ``odom_pose_xytheta = None``) instead of refused; the other formats always carry it."""
     fmt = fmt or sniff_format(path)
+    if odometry_optional and fmt == "rosbag":
+        kw["require_odometry"] = False
     if fmt == "carmen":
         from gatmo.datasets.carmen import CarmenLog
 

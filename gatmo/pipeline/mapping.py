@@ -144,7 +144,7 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
     odometry's (before loop closure); TUM, in the first scan's frame."""
     from gatmo._io import atomic_write_text
     from gatmo.config import dump_model
-    from gatmo.datasets.open import open_log, sniff_format
+    from gatmo.datasets.open import open_log
     from gatmo.datasets.tum import write_tum
     from gatmo.maps.io import save_map
     from gatmo.maps.mapping import render_map
@@ -153,10 +153,7 @@ def build_map(log: str | Path, out_yaml: str | Path, *, poses_out: str | Path | 
     t0 = time.perf_counter()
     cfg = cfg or MapBuildConfig()
     cfg = cfg.model_copy(update={"render": _render_config(cfg.render, resolution_m, max_range_m)})
-    fmt = fmt or sniff_format(log)
-    # a laser-only bag is read without odometry (the other formats always carry it)
-    kw = {"require_odometry": False} if fmt == "rosbag" else {}
-    src = open_log(log, fmt=fmt, skip_bad=True, **kw)
+    src = open_log(log, fmt=fmt, skip_bad=True, odometry_optional=True)  # laser-only bags too
     scans = []
     for s in src:
         scans.append(s)
