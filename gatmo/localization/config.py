@@ -284,13 +284,25 @@ class AmclConfig(GatmoModel):
         description="omni models only: weight of the squared translation in the variance of "
         "the strafe (sideways) noise (ROS 1: odom_alpha5; Nav2: alpha5)",
     )
-    odom_jump_m: float = Field(1.0, gt=0, description="one-step odometry jump treated as reset")
+    odom_jump_m: float = Field(
+        1.0, gt=0,
+        description="not an AMCL parameter: an odometry step between two consecutive scans "
+        "longer than this is a jump (a reset, a slip, or the wheels catching up after a "
+        "stall): see odom_jump_motion_weight",
+    )
     odom_jump_rad: float = Field(
         1.0, gt=0,
         description="not an AMCL parameter: a heading change between the odometry poses of two "
-        "consecutive scans beyond this is treated as a reset, as odom_jump_m is: the particles "
-        "restart around the last estimate with 4x the initial covariance (globally if it is "
-        "off the map)",
+        "consecutive scans beyond this is a jump, as odom_jump_m is",
+    )
+    odom_jump_motion_weight: float = Field(
+        0.5, ge=0, lt=1,
+        description="not an AMCL parameter: at a jump the filter holds two hypotheses, the "
+        "step was real motion (the particles follow it, with this prior mass) or none (a "
+        "cloud of max_particles/2 around the last estimate with 4x the initial covariance, "
+        "the rest); the next scan decides between them. 0: the second only, the filter "
+        "restarts around the last estimate. Either way, an estimate off the map restarts "
+        "globally",
     )
     # initial pose
     initial_pose_xytheta: tuple[float, float, float] | None = Field(
