@@ -21,7 +21,7 @@ from gatmo.datasets.sim import (
 from gatmo.datasets.sim.people import LEG_RADIUS_M
 from gatmo.datasets.sim.presets import route_distance
 from gatmo.datasets.sim.rearrange import rearrange
-from gatmo.datasets.sim.robot import drive, sample_odometry
+from gatmo.datasets.sim.robot import drive, sample_odometry, stall_odometry
 from gatmo.datasets.sim.world import Piece, World, cast, points_in_polygon
 from gatmo.datasets.tum import read_tum
 from gatmo.errors import ConfigError, FormatError
@@ -189,6 +189,40 @@ def test_odometry_scale_bias_is_applied_exactly_without_noise():
     od1 = sample_odometry(true, quiet, np.random.default_rng(0))
     back = np.array([compose(true[0], q) for q in od1])
     np.testing.assert_allclose(back[:, :2], true[:, :2], atol=1e-9)
+
+
+def test_odometry_stalls_hold_still_then_catch_up():
+    """``odom.stall_rate_per_min``: each stall repeats the pose before it for ``stall_s``, and
+    the scan after it is the unstalled odometry again (the whole motion in one step)."""
+    true, cfg = _true_path()
+    od = sample_odometry(true, cfg.odom, np.random.default_rng(0))
+    stall = cfg.odom.model_copy(update={"stall_rate_per_min": 6.0, "stall_s": 1.0})
+    dt = 1.0 / cfg.robot.scan_rate_hz
+    out, starts = stall_odometry(od, stall, dt, np.random.default_rng(1))
+    k = int(round(1.0 / dt))
+    assert len(starts) >= 1 and np.all(np.diff(starts) > k)
+    held = np.zeros(len(od), dtype=bool)
+    for i in starts:
+        np.testing.assert_array_equal(out[i:i + k], np.repeat(od[i - 1][None], len(out[i:i + k]),
+                                                              axis=0))
+        held[i:i + k] = True
+        if i + k < len(od):
+            np.testing.assert_array_equal(out[i + k], od[i + k])
+    np.testing.assert_array_equal(out[~held], od[~held])
+    # a run with stalls is the run without them but for the odometry
+    cfg6 = short_cfg()
+    cfg6.odom.stall_rate_per_min = 20.0
+    world, route = make_world("hall", np.random.default_rng(4))
+    plain = simulate_run(world, route, short_cfg(), np.random.default_rng(5))
+    stalled = simulate_run(world, route, cfg6, np.random.default_rng(5))
+    assert [s.stamp_s for s in plain] == [s.stamp_s for s in stalled]
+    np.testing.assert_array_equal(np.array([s.ranges_m for s in plain]),
+                                  np.array([s.ranges_m for s in stalled]))
+    a = np.array([s.odom_pose_xytheta for s in plain])
+    b = np.array([s.odom_pose_xytheta for s in stalled])
+    still = np.all(np.diff(b, axis=0) == 0.0, axis=1)
+    assert still.sum() >= 10 and not np.all(a == b)
+    assert np.all(np.any(np.diff(a, axis=0) != 0.0, axis=1))  # the robot never stands still
 
 
 def test_odometry_noise_matches_alpha3_and_drift_grows():

@@ -42,6 +42,12 @@ class OdomConfig(GatmoModel):
     scale_bias_std: float = Field(
         0.02, ge=0, description="per run, translation and rotation are each multiplied by "
         "1 + N(0, scale_bias_std) (a wheel calibration error: systematic drift)")
+    stall_rate_per_min: float = Field(
+        0.0, ge=0, description="stalls per minute of the run: the reported odometry holds "
+        "still for stall_s, then catches up with the whole motion in one step (MIT CSAIL's "
+        "wheels do this inside turns); 0: none")
+    stall_s: float = Field(
+        1.5, gt=0, description="how long each stall holds the odometry still [s]")
 
 
 class PeopleConfig(GatmoModel):

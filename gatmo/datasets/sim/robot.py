@@ -123,4 +123,27 @@ def sample_odometry(true_xytheta: np.ndarray, cfg: OdomConfig, rng: np.random.Ge
     return out
 
 
-__all__ = ["RouteFollower", "draw_scale_bias", "drive", "sample_odometry"]
+def stall_odometry(odom_xytheta: np.ndarray, cfg: OdomConfig, dt_s: float,
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``odom_xytheta`` (N, 3) with stalls: starts drawn at ``cfg.stall_rate_per_min`` (a
+    Poisson process over the scans, ``dt_s`` apart), each holding the reported pose at the
+    one before for ``cfg.stall_s``; the scan after a stall reports the true odometry again,
+    the whole motion in one step. Returns (stalled poses (N, 3), stall start indices (S,))."""
+    out = np.array(odom_xytheta, dtype=float, copy=True)
+    n = len(out)
+    k = max(1, int(round(cfg.stall_s / dt_s)))
+    p = cfg.stall_rate_per_min / 60.0 * dt_s
+    starts = []
+    i = 1
+    draws = rng.random(n)
+    while i < n:
+        if draws[i] < p:
+            out[i:i + k] = out[i - 1]
+            starts.append(i)
+            i += k + 1  # stalls do not overlap, and a catch-up step comes between
+        else:
+            i += 1
+    return out, np.array(starts, dtype=int)
+
+
+__all__ = ["RouteFollower", "draw_scale_bias", "drive", "sample_odometry", "stall_odometry"]

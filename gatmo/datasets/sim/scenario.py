@@ -22,7 +22,12 @@ from gatmo.datasets.sim.config import SimConfig
 from gatmo.datasets.sim.people import Person, Walker, make_people, person_in_front
 from gatmo.datasets.sim.presets import make_world
 from gatmo.datasets.sim.rearrange import rearrange
-from gatmo.datasets.sim.robot import RouteFollower, draw_scale_bias, sample_odometry
+from gatmo.datasets.sim.robot import (
+    RouteFollower,
+    draw_scale_bias,
+    sample_odometry,
+    stall_odometry,
+)
 from gatmo.datasets.sim.world import World, cast, rasterize
 from gatmo.datasets.types import Scan
 from gatmo.errors import FormatError
@@ -85,6 +90,8 @@ def simulate_run_detailed(world: World, route: np.ndarray, cfg: SimConfig,
             w.step(dt, np.array([bot.x, bot.y]))
     bias = draw_scale_bias(cfg.odom, r_odom)
     odom = sample_odometry(true, cfg.odom, r_odom, bias)
+    if cfg.odom.stall_rate_per_min > 0:  # drawn after: runs without stalls stay the same
+        odom, _ = stall_odometry(odom, cfg.odom, dt, r_odom)
     L = cfg.laser
     angles = np.radians(np.linspace(-L.fov_deg / 2, L.fov_deg / 2, L.beams))
     laser_pose = np.array([L.forward_offset_m, 0.0, 0.0])
