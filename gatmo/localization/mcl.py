@@ -146,11 +146,14 @@ class MonteCarloLocalizer:
             raise MapError(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}) is {why}",
                            field="initial_pose")
         cov = self.initial_cov() if cov is None else np.asarray(cov, dtype=float)
-        n = self.cfg.max_particles
-        pts = self.rng.multivariate_normal(pose, cov, size=n, method="cholesky")
-        pts[:, 2] = wrap_angle(pts[:, 2])
-        self._reset_particles(pts)
+        self._reset_particles(self._gaussian_cloud(pose, cov, self.cfg.max_particles))
         self._est, self._cov = pose.copy(), cov.copy()
+
+    def _gaussian_cloud(self, pose_xytheta: np.ndarray, cov: np.ndarray, n: int) -> np.ndarray:
+        """``n`` particles (n, 3) drawn around a map pose with covariance ``cov`` (3, 3)."""
+        pts = self.rng.multivariate_normal(pose_xytheta, cov, size=n, method="cholesky")
+        pts[:, 2] = wrap_angle(pts[:, 2])
+        return pts
 
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """The current estimate without a new scan: (pose (3,) map frame [m, m, rad], its
@@ -233,10 +236,8 @@ class MonteCarloLocalizer:
                 # motion: the particles follow it, as AMCL's would); the scan decides. MIT
                 # CSAIL stalls inside a turn and catches up 0.47 m / 85 deg in one step
                 # (docs/experiments.md, sixty-ninth session).
-                n = max(1, c.max_particles // 2)
-                reset_pts = self.rng.multivariate_normal(self._est, self.initial_cov() * 4.0,
-                                                         size=n, method="cholesky")
-                reset_pts[:, 2] = wrap_angle(reset_pts[:, 2])
+                reset_pts = self._gaussian_cloud(self._est, self.initial_cov() * 4.0,
+                                                 max(1, c.max_particles // 2))
                 self.w_slow = self.w_fast = 0.0
                 self._converged = False
                 self._force_update = True
