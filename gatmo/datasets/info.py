@@ -124,6 +124,31 @@ def _yaml_summary(path: Path) -> dict:
     return _grid_summary(open_map(path))
 
 
+def _odometry_glitches(odom_xytheta: np.ndarray) -> dict:
+    """What the localizer will see of the wheels' glitches, from the odometry poses (N, 3):
+    ``odom_jumps``, steps between two scans over its default ``odom_jump_m`` /
+    ``odom_jump_rad`` (it holds both "moved" and "did not move" there), and
+    ``odom_catch_ups``, steps over 3x the median moving step right after the odometry stood
+    exactly still (a stall: MIT CSAIL's wheels stall in turns and catch up in one step)."""
+    from gatmo.geometry import relative
+    from gatmo.localization.config import AmclConfig
+
+    if len(odom_xytheta) < 2:
+        return {"odom_jumps": 0, "odom_catch_ups": 0}
+    f = AmclConfig.model_fields
+    d = np.array([relative(a, b) for a, b in zip(odom_xytheta[:-1], odom_xytheta[1:],
+                                                  strict=True)])
+    trans, turn = np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])
+    jumps = (trans > f["odom_jump_m"].default) | (turn > f["odom_jump_rad"].default)
+    still = ~np.any(np.abs(d) > 1e-9, axis=1)
+    size = trans + 0.3 * turn  # a turn of 1 rad weighs as 0.3 m of travel
+    if still.all():
+        return {"odom_jumps": int(jumps.sum()), "odom_catch_ups": 0}
+    big = size > 3.0 * np.median(size[~still])
+    catch_ups = big[1:] & still[:-1]
+    return {"odom_jumps": int(jumps.sum()), "odom_catch_ups": int(catch_ups.sum())}
+
+
 def summarize(path: str | Path, fmt: str | None = None) -> dict:
     """A dict describing a log, bag, map YAML, wean.dat, TUM, relations, objects.json or
     scenario.json file, a gatmo stack configuration or a ROS AMCL parameter file."""
@@ -176,6 +201,7 @@ def summarize(path: str | Path, fmt: str | None = None) -> dict:
         "duration_s": float(stamps[-1] - stamps[0]) if stamps else 0.0,
         "odom_path_m": path_length_m(np.array(odom)) if odom else 0.0,
         "has_odometry": bool(odom),
+        **_odometry_glitches(np.array(odom)),
         "has_ground_truth": gt > 0,
         "skipped": src.stats.skipped,
     }

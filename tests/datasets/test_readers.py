@@ -333,3 +333,40 @@ def test_open_map_reads_a_wean_format_map_by_content_and_commands_take_it(tmp_pa
     s = run_localize(wean, tmp_path / "lab.clf", out_path=tmp_path / "p.tum",
                      initial_pose=[1.0, 1.5, 0.0])
     assert s.scans == 10 and s.errors["ate_median_m"] < 0.1
+
+
+def test_info_counts_the_wheels_stalls_and_jumps(tmp_path):
+    """``gatmo info`` on a log: ``odom_catch_ups`` counts the steps that follow odometry
+    standing exactly still and are over 3x the median step (each simulated stall's catch-up,
+    the robot moving), ``odom_jumps`` the steps the localizer will take for jumps (over 1 m or
+    1 rad); a run without stalls has neither."""
+    from gatmo.datasets.sim import SimConfig, make_world, simulate_run
+    from gatmo.datasets.sim.robot import stall_odometry
+    from gatmo.geometry import relative
+
+    cfg = SimConfig.for_preset("hall")
+    cfg.robot.duration_s = 30.0
+    cfg.people.count_per_run = 0
+    world, route = make_world("hall", np.random.default_rng(2))
+    scans = simulate_run(world, route, cfg, np.random.default_rng(3))
+    plain = tmp_path / "plain.clf"
+    write_carmen(plain, scans)
+    s = summarize(plain)
+    assert s["odom_catch_ups"] == 0 and s["odom_jumps"] == 0
+    odom = np.array([sc.odom_pose_xytheta for sc in scans])
+    stall = cfg.odom.model_copy(update={"stall_rate_per_min": 6.0, "stall_s": 1.0})
+    stalled, starts = stall_odometry(odom, stall, 0.1, np.random.default_rng(4))
+    # one odometry jump, 2 m ahead, at a scan clear of the stalls
+    j = next(i for i in range(50, len(scans))
+             if all(abs(i - a) > 15 and abs(i - a - 10) > 15 for a in starts))
+    moved = [compose(compose(stalled[j - 1], [2.0, 0.0, 0.0]), relative(stalled[j - 1], o))
+             for o in stalled[j:]]
+    stalled[j:] = moved
+    for sc, o in zip(scans, stalled, strict=True):
+        sc.odom_pose_xytheta = o
+    path = tmp_path / "stalled.clf"
+    write_carmen(path, scans)
+    s = summarize(path)
+    caught = [a for a in starts if a + 10 < len(scans)]
+    assert len(caught) >= 2
+    assert s["odom_catch_ups"] == len(caught) and s["odom_jumps"] == 1
