@@ -296,13 +296,13 @@ class AmclConfig(GatmoModel):
         "consecutive scans beyond this is a jump, as odom_jump_m is",
     )
     odom_jump_motion_weight: float = Field(
-        0.5, ge=0, lt=1,
+        0.5, ge=0, le=1,
         description="not an AMCL parameter: at a jump the filter holds two hypotheses, the "
         "step was real motion (the particles follow it, with this prior mass) or none (a "
         "cloud of max_particles/2 around the last estimate with 4x the initial covariance, "
         "the rest); the next scan decides between them. 0: the second only, the filter "
-        "restarts around the last estimate. Either way, an estimate off the map restarts "
-        "globally",
+        "restarts around the last estimate; 1: the first only, as AMCL takes every step. An "
+        "estimate off the map restarts globally",
     )
     # initial pose
     initial_pose_xytheta: tuple[float, float, float] | None = Field(

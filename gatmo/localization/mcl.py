@@ -226,6 +226,8 @@ class MonteCarloLocalizer:
             if not self._on_map(self._est):
                 self.global_localization()
                 self._odom_at_update = odom.copy()
+            elif c.odom_jump_motion_weight >= 1.0:
+                pass  # the step is motion, as AMCL (which has no jump test) takes every step
             elif c.odom_jump_motion_weight <= 0.0:
                 # wheel slip or an odometry reset: restart around the last estimate
                 self.set_initial_pose(self._est, self.initial_cov() * 4.0)

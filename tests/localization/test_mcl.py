@@ -245,3 +245,5 @@ def test_odometry_catch_up_after_a_stall_is_motion(office, seed):
     assert resets == 1 and err.max() < 0.3
     resets, err = _stalled_turn(office, 0.0, seed)
     assert resets == 1 and err.min() > 0.4
+    resets, err = _stalled_turn(office, 1.0, seed)  # AMCL's way: every step is motion
+    assert resets == 1 and err.max() < 0.3
