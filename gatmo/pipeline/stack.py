@@ -192,6 +192,12 @@ class FusionConfig(GatmoModel):
         True, description="run the ICP scan matcher beside the localizer; its frame is reset "
         "onto the filter's estimate when the filter is confident. Off: the fused pose is the "
         "localizer's own")
+    publish_through_stalls: bool = Field(
+        False, description="while the wheels report exactly no motion between scans (a stall, "
+        "or the robot standing) and the scan matcher's ICP fits say it moved, the published "
+        "pose moves by the matcher's steps since the wheels stopped; the filter and GATMO are "
+        "untouched (the filter updates on the wheels' travel and stands still through a "
+        "stall). Needs use_scan_matcher")
     publish_pose: Literal["localizer", "fused", "aligned"] = Field(
         "aligned", description="the pose the stack reports: aligned, the last pose the "
         "scan-to-map alignment confirmed with a tight fit, carried by odometry (needs GATMO and "
@@ -755,6 +761,10 @@ class LocalizationStack:
         self._reloc_odom: np.ndarray | None = None
         self._reloc_travel_m = 0.0
         self.relocalizations: list[tuple[float, np.ndarray, np.ndarray]] = []  # (stamp, from, to)
+        # publish_through_stalls: (wheels, matcher pose) at the last scan, and the matcher's
+        # motion (base frame) since the wheels last moved
+        self._stall_prev: tuple[np.ndarray, np.ndarray] | None = None
+        self._stall_motion = np.zeros(3)
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -774,8 +784,26 @@ class LocalizationStack:
         self._anchor_apart = 0
         self._anchor_ref = None
         self._injected_seen = _injected(self.localizer)
+        self._stall_prev, self._stall_motion = None, np.zeros(3)
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
+
+    def _through_stall(self, scan: Scan, match) -> np.ndarray:
+        """``publish_through_stalls``: the matcher's motion (3,) (base frame) since the wheels
+        last reported any, while they report none (zeros otherwise)."""
+        if not self.fusion.publish_through_stalls or match is None:
+            return np.zeros(3)
+        wheels = np.asarray(scan.odom_pose_xytheta, dtype=float)
+        m = np.asarray(match.pose_xytheta, dtype=float)
+        if self._stall_prev is not None:
+            still = not np.any(np.abs(relative(self._stall_prev[0], wheels)) > 1e-9)
+            if not still:
+                self._stall_motion = np.zeros(3)
+            elif match.used_icp:
+                self._stall_motion = compose(self._stall_motion,
+                                             relative(self._stall_prev[1], m))
+        self._stall_prev = (wheels, m)
+        return self._stall_motion
 
     def _fits(self, points_base_xy: np.ndarray, *poses_xytheta: np.ndarray) -> list[float]:
         """Per pose, the fraction of the points (N, 2) (base frame, 5 cm voxels) within
@@ -963,6 +991,7 @@ class LocalizationStack:
         """Process one scan; see the module docstring for the order of work."""
         t0 = time.perf_counter()
         match = self.matcher.register(scan) if self.matcher is not None else None
+        stall_motion = self._through_stall(scan, match)
         masked, withheld = self._masked(scan)
         if self.anchor is not None and self._anchor_ref is None:
             self._anchor_ref = self._anchor_start(scan)
@@ -1113,6 +1142,8 @@ class LocalizationStack:
             a = self._anchor_if_apart(loc_pose, odom, scan)
             if a is not None:
                 published = a
+        if stall_motion.any():
+            published = compose(published, stall_motion)
         return StackStep(
             stamp_s=float(scan.stamp_s),
             pose_xytheta=published,
