@@ -136,8 +136,7 @@ def _odometry_glitches(odom_xytheta: np.ndarray) -> dict:
     if len(odom_xytheta) < 2:
         return {"odom_jumps": 0, "odom_catch_ups": 0}
     f = AmclConfig.model_fields
-    d = np.array([relative(a, b) for a, b in zip(odom_xytheta[:-1], odom_xytheta[1:],
-                                                  strict=True)])
+    d = relative(odom_xytheta[:-1], odom_xytheta[1:])  # (N - 1, 3): relative broadcasts
     trans, turn = np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])
     jumps = (trans > f["odom_jump_m"].default) | (turn > f["odom_jump_rad"].default)
     still = ~np.any(np.abs(d) > 1e-9, axis=1)
