@@ -198,6 +198,19 @@ class FusionConfig(GatmoModel):
         "pose moves by the matcher's steps since the wheels stopped; the filter and GATMO are "
         "untouched (the filter updates on the wheels' travel and stands still through a "
         "stall). Needs use_scan_matcher")
+    carry_matcher_inflation: float | None = Field(
+        None, gt=0, description="with publish_pose aligned: the last tightly confirmed pose is "
+        "carried not by the wheels alone but by each step's information-weighted average of "
+        "the wheels' step and the scan matcher's ICP step, the ICP covariance multiplied by "
+        "this (its fits on people and along straights are confidently off), the wheels' "
+        "step deviation carry_wheel_std_per_m per metre and carry_wheel_std_per_rad per "
+        "radian. None: the wheels alone. Needs use_scan_matcher")
+    carry_wheel_std_per_m: float = Field(
+        0.07, gt=0, description="see carry_matcher_inflation: the wheels' step deviation per "
+        "metre of the step, in translation [m/m] and in heading [rad/m]")
+    carry_wheel_std_per_rad: float = Field(
+        0.05, gt=0, description="see carry_matcher_inflation: the wheels' step deviation per "
+        "radian turned, in heading [rad/rad] and in translation [m/rad]")
     publish_pose: Literal["localizer", "fused", "aligned"] = Field(
         "aligned", description="the pose the stack reports: aligned, the last pose the "
         "scan-to-map alignment confirmed with a tight fit, carried by odometry (needs GATMO and "
@@ -785,8 +798,39 @@ class LocalizationStack:
         self._anchor_ref = None
         self._injected_seen = _injected(self.localizer)
         self._stall_prev, self._stall_motion = None, np.zeros(3)
+        self._carry = self._carry_prev = None
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
+
+    def _carry_pose(self, odom: np.ndarray, match) -> np.ndarray:
+        """The odometry the published pose is carried by (3,): the wheels' ``odom``, or with
+        ``carry_matcher_inflation`` the wheels' pose at the run's first scan composed with each
+        step's information-weighted average of the wheels' and the ICP step."""
+        f = self.fusion
+        if f.carry_matcher_inflation is None or match is None:
+            return odom
+        mpose = np.asarray(match.pose_xytheta, dtype=float)
+        if self._carry is None:
+            self._carry = odom.copy()
+        else:
+            w_odom, w_match = self._carry_prev
+            dw = relative(w_odom, odom)
+            d = dw
+            if match.used_icp:
+                dm = relative(w_match, mpose)
+                # the pose's covariance (matcher frame) turned into the base frame
+                c, s = np.cos(mpose[2]), np.sin(mpose[2])
+                R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+                cm = R @ np.asarray(match.cov, dtype=float) @ R.T * f.carry_matcher_inflation
+                t, r = float(np.hypot(dw[0], dw[1])), abs(float(dw[2]))
+                st = f.carry_wheel_std_per_m * t + 0.2 * f.carry_wheel_std_per_rad * r + 2e-3
+                sr = f.carry_wheel_std_per_rad * r + 0.15 * f.carry_wheel_std_per_m * t + 2e-3
+                iw = np.diag([st**-2, st**-2, sr**-2])
+                im = np.linalg.inv(cm + np.diag([1e-6, 1e-6, 1e-8]))
+                d = np.linalg.solve(im + iw, im @ dm + iw @ dw)
+            self._carry = compose(self._carry, d)
+        self._carry_prev = (odom.copy(), mpose.copy())
+        return self._carry.copy()
 
     def _through_stall(self, scan: Scan, match) -> np.ndarray:
         """``publish_through_stalls``: the matcher's motion (3,) (base frame) since the wheels
@@ -1004,11 +1048,12 @@ class LocalizationStack:
         loc_pose = np.asarray(est.pose_xytheta, dtype=float)
         confident = is_confident(est, self.fusion)
         odom = np.asarray(scan.odom_pose_xytheta, dtype=float)
+        carry = self._carry_pose(odom, match)
         if (self._last_loc is None and self.initial_pose_xytheta is not None
                 and self.fusion.publish_blend_from_start and self.fusion.publish_blend):
             # the run's first scan: the given start pose, carried until the first tight
             # confirmation (a restart of the filter drops it, as it drops a confirmed pose)
-            self._published_anchor = (self.initial_pose_xytheta.copy(), odom.copy(),
+            self._published_anchor = (self.initial_pose_xytheta.copy(), carry.copy(),
                                       self.initial_std_m)
         if self._last_loc is not None:
             d_odom = relative(self._last_odom, odom)
@@ -1135,7 +1180,7 @@ class LocalizationStack:
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
-            published = self._aligned_pose(published, odom, publish_confirmed)
+            published = self._aligned_pose(published, carry, publish_confirmed)
         if self.anchor is not None and self.fusion.publish_anchor_when_apart:
             # the sharp filter slides onto moved furniture before the anchor test restarts it
             # (docs/experiments.md, forty-seventh session): report the anchor meanwhile

@@ -709,10 +709,12 @@ class _OffAtLocalizer(ScriptedLocalizer):
 
 
 def _publishing_run(fusion: FusionConfig, confident: list[int], off_at: dict | None = None,
-                    **stack_kw):
+                    matcher=None, odom_scale: float = 1.0, **stack_kw):
     """(truth (30, 3), the localizer's bias (3,), the steps): a robot driving 9 cm per scan
     through a room of eight boxes, the scripted localizer off by the bias (and by ``off_at[i]``
-    more on scan i) and strictly confident on the scans ``confident``, odometry exact."""
+    more on scan i) and strictly confident on the scans ``confident``, odometry exact (or its
+    travel from the start scaled by ``odom_scale``). ``matcher``: called with the truth, it
+    gives the scan matcher (else none)."""
     boxes = [(x, y, x + 0.4, y + 0.4) for x in (1.0, 2.2, 3.4, 4.6) for y in (0.8, 2.6)]
     grid = room_grid(6, 4, 0.05, boxes=boxes)
     n = 30
@@ -722,11 +724,70 @@ def _publishing_run(fusion: FusionConfig, confident: list[int], off_at: dict | N
     loc = _OffAtLocalizer(truth, confident, bias, off_at or {})
     if stack_kw.get("initial_pose_xytheta") == "truth":
         stack_kw["initial_pose_xytheta"] = truth[0]
-    stack = LocalizationStack(loc, None, _MapOnly(grid), fusion, **stack_kw)
+    stack = LocalizationStack(loc, None if matcher is None else matcher(truth), _MapOnly(grid),
+                              fusion, **stack_kw)
     stack.begin_run(1)
+    odom = truth.copy()
+    odom[:, :2] = truth[0, :2] + odom_scale * (truth[:, :2] - truth[0, :2])
     scans = [make_scan(grid, truth[i], n_beams=361, fov_rad=2 * np.pi, max_range_m=8.0,
-                       odom_pose_xytheta=truth[i], stamp_s=float(i)) for i in range(n)]
+                       odom_pose_xytheta=odom[i], stamp_s=float(i)) for i in range(n)]
     return truth, bias, [stack.step(s) for s in scans]
+
+
+class _IcpMatcher(DriftingMatcher):
+    """:class:`DriftingMatcher` with a result as the ICP matcher's: a covariance (``std_m``
+    in translation, a tenth of it in rad) and whether ICP fitted (``used_icp``)."""
+
+    def __init__(self, truth, std_m: float, used_icp: bool = True):
+        super().__init__(truth, (0.3, -0.2, 0.4))
+        self.cov = np.diag([std_m**2, std_m**2, (0.1 * std_m) ** 2])
+        self.used_icp = used_icp
+
+    def register(self, scan):
+        p = compose(self.T, self.truth[self.i])
+        self.i += 1
+
+        @dataclass
+        class M:
+            pose_xytheta: np.ndarray
+            cov: np.ndarray
+            used_icp: bool
+
+        return M(p, self.cov, self.used_icp)
+
+
+@pytest.mark.parametrize("inflation", [None, 10.0])
+@pytest.mark.parametrize("std_m,used_icp", [(0.002, True), (0.002, False), (1.0, True)])
+def test_the_confirmed_pose_is_carried_by_the_wheels_and_the_matchers_steps(inflation, std_m,
+                                                                           used_icp):
+    """``carry_matcher_inflation``: the wheels report 10 % too much travel and the scan matcher
+    exact steps. Confirmed at scan 0 only, the pose published on the next scans is carried by
+    each step's information-weighted average of the wheels' and the matcher's: with a sure ICP
+    fit (2 mm, inflated 10x) the wheels' share of each 9 cm step is sm^2 / (sm^2 + sw^2), sw
+    the wheels' deviation for their step (7 cm per m, a fifth of 5 cm per rad turned, 2 mm),
+    so the error grows by that share of a tenth of the travel; where ICP did not fit, or its
+    covariance (1 m) says nothing, and without the option, the wheels carry it: off by a tenth
+    of the travel."""
+    fusion = FusionConfig(publish_pose="aligned", publish_carry_m=0.5, confident_for_m=0.0,
+                          carry_matcher_inflation=inflation, absence_max_std_xy_m=0.1,
+                          absence_max_std_theta_deg=3.0)
+    truth, _, out = _publishing_run(fusion, [0], matcher=lambda t: _IcpMatcher(t, std_m,
+                                                                              used_icp),
+                                    odom_scale=1.1)
+    assert out[0].gatmo_pose_verified and not any(o.gatmo_pose_verified for o in out[1:])
+    published = np.array([o.pose_xytheta for o in out])
+    err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
+    travel = np.hypot(*(truth[:, :2] - truth[0, :2]).T)
+    if inflation is not None and used_icp and std_m < 0.01:
+        step = relative(truth[0], truth[1])  # the wheels' step is 1.1x its translation
+        sw = 0.07 * 1.1 * np.hypot(step[0], step[1]) + 0.2 * 0.05 * abs(step[2]) + 2e-3
+        share = inflation * std_m**2 / (inflation * std_m**2 + sw**2)
+        # along the travel (x), from scan 0's confirmation (itself a millimetre or two off)
+        ahead = published[:, 0] - truth[:, 0]
+        np.testing.assert_allclose(ahead[1:6] - ahead[0], share * 0.1 * travel[1:6], atol=5e-4)
+        assert np.all(err[1:6] < 0.5 * 0.1 * travel[1:6])  # half the wheels' error at most
+    else:
+        np.testing.assert_allclose(err[1:6], 0.1 * travel[1:6], atol=0.004)
 
 
 @pytest.mark.parametrize("publish", ["localizer", "aligned"])
