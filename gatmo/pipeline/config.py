@@ -261,9 +261,6 @@ def real_stack_config(sharp_model: bool = True):
     # 0.05 (MIT CSAIL 0.065 -> 0.064 m ATE, Intel and ACES the same or lower; chosen on these
     # three logs from the two values, docs/experiments.md, fifty-ninth session)
     cfg.fusion.publish_blend_odom_std_per_m = 0.1
-    # the wheels alone carry it here: the matcher's share was measured on the simulator's
-    # wheels and 4 m laser only
-    cfg.fusion.carry_matcher_inflation = None
     # a start pose given with AMCL's 0.5 m cloud is no anchor; not measured on these logs
     cfg.fusion.publish_blend_from_start = False
     # MIT CSAIL's wheels stall (exactly still for a few scans, then the whole motion at once):

@@ -778,6 +778,11 @@ class LocalizationStack:
         # motion (base frame) since the wheels last moved
         self._stall_prev: tuple[np.ndarray, np.ndarray] | None = None
         self._stall_motion = np.zeros(3)
+        # carry_matcher_inflation: the carrying odometry's pose, (wheels, matcher pose) at the
+        # last scan, and whether the wheels stood exactly still there
+        self._carry: np.ndarray | None = None
+        self._carry_prev: tuple[np.ndarray, np.ndarray] | None = None
+        self._carry_stalled = False
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -799,6 +804,7 @@ class LocalizationStack:
         self._injected_seen = _injected(self.localizer)
         self._stall_prev, self._stall_motion = None, np.zeros(3)
         self._carry = self._carry_prev = None
+        self._carry_stalled = False
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
@@ -816,7 +822,14 @@ class LocalizationStack:
             w_odom, w_match = self._carry_prev
             dw = relative(w_odom, odom)
             d = dw
-            if match.used_icp:
+            still = not np.any(np.abs(dw) > 1e-9)
+            # through a stall (the wheels exactly still) and at the wheels' catch-up the carry
+            # takes the wheels' steps: the matcher falls back on the wheels at a catch-up too
+            # far from its guess, which would count the stall's motion twice, and moving the
+            # published pose through a stall is publish_through_stalls' job
+            stall = still or self._carry_stalled
+            self._carry_stalled = still
+            if match.used_icp and not stall:
                 dm = relative(w_match, mpose)
                 # the pose's covariance (matcher frame) turned into the base frame
                 c, s = np.cos(mpose[2]), np.sin(mpose[2])
