@@ -744,16 +744,14 @@ class _IcpMatcher(DriftingMatcher):
         self.used_icp = used_icp
 
     def register(self, scan):
-        p = compose(self.T, self.truth[self.i])
-        self.i += 1
+        return _IcpResult(super().register(scan).pose_xytheta, self.cov, self.used_icp)
 
-        @dataclass
-        class M:
-            pose_xytheta: np.ndarray
-            cov: np.ndarray
-            used_icp: bool
 
-        return M(p, self.cov, self.used_icp)
+@dataclass
+class _IcpResult:
+    pose_xytheta: np.ndarray
+    cov: np.ndarray
+    used_icp: bool
 
 
 @pytest.mark.parametrize("inflation", [None, 10.0])
