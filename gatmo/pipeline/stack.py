@@ -206,11 +206,12 @@ class FusionConfig(GatmoModel):
         "step deviation carry_wheel_std_per_m per metre and carry_wheel_std_per_rad per "
         "radian. None: the wheels alone. Needs use_scan_matcher")
     carry_wheel_std_per_m: float = Field(
-        0.07, gt=0, description="see carry_matcher_inflation: the wheels' step deviation per "
-        "metre of the step, in translation [m/m] and in heading [rad/m]")
+        0.07, gt=0, description="see carry_matcher_inflation: the wheels' step deviation in "
+        "translation per metre of the step [m/m] (and 0.15 of it in heading [rad/m]), on top of "
+        "2 mm / 2 mrad")
     carry_wheel_std_per_rad: float = Field(
-        0.05, gt=0, description="see carry_matcher_inflation: the wheels' step deviation per "
-        "radian turned, in heading [rad/rad] and in translation [m/rad]")
+        0.05, gt=0, description="see carry_matcher_inflation: the wheels' step deviation in "
+        "heading per radian turned [rad/rad] (and 0.2 of it in translation [m/rad])")
     publish_pose: Literal["localizer", "fused", "aligned"] = Field(
         "aligned", description="the pose the stack reports: aligned, the last pose the "
         "scan-to-map alignment confirmed with a tight fit, carried by odometry (needs GATMO and "
@@ -829,12 +830,13 @@ class LocalizationStack:
             # published pose through a stall is publish_through_stalls' job
             stall = still or self._carry_stalled
             self._carry_stalled = still
-            if match.used_icp and not stall:
+            cov = np.asarray(match.cov, dtype=float)
+            if match.used_icp and not stall and np.all(np.isfinite(cov)):
                 dm = relative(w_match, mpose)
                 # the pose's covariance (matcher frame) turned into the base frame
                 c, s = np.cos(mpose[2]), np.sin(mpose[2])
                 R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-                cm = R @ np.asarray(match.cov, dtype=float) @ R.T * f.carry_matcher_inflation
+                cm = R @ cov @ R.T * f.carry_matcher_inflation
                 t, r = float(np.hypot(dw[0], dw[1])), abs(float(dw[2]))
                 st = f.carry_wheel_std_per_m * t + 0.2 * f.carry_wheel_std_per_rad * r + 2e-3
                 sr = f.carry_wheel_std_per_rad * r + 0.15 * f.carry_wheel_std_per_m * t + 2e-3
@@ -1336,7 +1338,9 @@ class LocalizationStack:
                       confirmed: np.ndarray | None) -> np.ndarray:
         """``publish_pose: aligned``: ``confirmed`` (the alignment's pose on this scan, or
         None), else the last one carried by odometry while within ``publish_carry_*`` and
-        ``max_offset_jump_m`` of the filter's ``loc_pose``, else ``loc_pose``."""
+        ``max_offset_jump_m`` of the filter's ``loc_pose``, else ``loc_pose``. ``odom`` (3,):
+        the carrying odometry's pose (:meth:`_carry_pose`: the wheels', or with
+        ``carry_matcher_inflation`` theirs and the matcher's steps together)."""
         f = self.fusion
         if confirmed is not None:
             self._published_anchor = (_wrapped(confirmed), odom.copy(),
