@@ -644,6 +644,11 @@ class StackStep:
     relocalized: bool = False
 
 
+def _wheels_still(step_xytheta: np.ndarray) -> bool:
+    """The wheels' step (3,) is exactly no motion: a stall, or the robot standing."""
+    return not np.any(np.abs(step_xytheta) > 1e-9)
+
+
 def _wrapped(pose_xytheta) -> np.ndarray:
     """A new (3,) pose array with the heading wrapped to [-pi, pi)."""
     return np.array([pose_xytheta[0], pose_xytheta[1], float(wrap_angle(pose_xytheta[2]))])
@@ -823,7 +828,7 @@ class LocalizationStack:
             w_odom, w_match = self._carry_prev
             dw = relative(w_odom, odom)
             d = dw
-            still = not np.any(np.abs(dw) > 1e-9)
+            still = _wheels_still(dw)
             # through a stall (the wheels exactly still) and at the wheels' catch-up the carry
             # takes the wheels' steps: the matcher falls back on the wheels at a catch-up too
             # far from its guess, which would count the stall's motion twice, and moving the
@@ -855,7 +860,7 @@ class LocalizationStack:
         wheels = np.asarray(scan.odom_pose_xytheta, dtype=float)
         m = np.asarray(match.pose_xytheta, dtype=float)
         if self._stall_prev is not None:
-            still = not np.any(np.abs(relative(self._stall_prev[0], wheels)) > 1e-9)
+            still = _wheels_still(relative(self._stall_prev[0], wheels))
             if not still:
                 self._stall_motion = np.zeros(3)
             elif match.used_icp:
