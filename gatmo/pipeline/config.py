@@ -274,6 +274,12 @@ def real_stack_config(sharp_model: bool = True):
     # (0.68 -> 0.43 deg), Intel 0.158 -> 0.157 m (0.046 m / 0.96 deg -> 0.039 m / 0.52 deg);
     # AMCL's flat model the same (it never confirms a pose tightly enough to carry one;
     # docs/experiments.md, seventieth session)
+    # ... with the carry's share of the matcher learnt in each run from the confirmations
+    # (an unknown robot's wheels and matcher): demo configuration, MIT CSAIL 0.033 -> 0.029 m,
+    # ACES 0.068 -> 0.065 m, Intel 0.157 -> 0.155 m (relations 0.039 m / 0.52 deg -> 0.034 m /
+    # 0.46 deg), the UoB Stage room's noise-free wheels 0.0723 -> 0.0719 m (static 0.0715);
+    # off in the halls, where it changed nothing (docs/experiments.md, seventy-first session)
+    cfg.fusion.carry_adapt_inflations = [0.3, 1.0, 3.0, 10.0, 30.0, 100.0]
     return cfg
 
 

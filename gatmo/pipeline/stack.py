@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, PositiveFloat
 
 from gatmo.config import GatmoModel
 from gatmo.datasets.types import Scan
@@ -205,6 +205,29 @@ class FusionConfig(GatmoModel):
         "this (its fits on people and along straights are confidently off), the wheels' "
         "step deviation carry_wheel_std_per_m per metre and carry_wheel_std_per_rad per "
         "radian. None: the wheels alone. Needs use_scan_matcher")
+    carry_adapt_inflations: list[PositiveFloat] | None = Field(
+        None, min_length=2, description="with carry_matcher_inflation: the carry is run with "
+        "each of these inflations side by side; at tight confirmations carry_adapt_spacing_m "
+        "of travel apart, each carry's pose carried from each earlier one within "
+        "carry_adapt_max_m is scored against it (squared error, heading at 1 m/rad, "
+        "forgotten over carry_adapt_halflife_m of travel), and the carry published is the "
+        "one scoring best once carry_adapt_min_pairs were scored (carry_matcher_inflation "
+        "until then). Learns, in each run, how far this robot's wheels and scan matcher are "
+        "to be trusted. None: carry_matcher_inflation always")
+    carry_adapt_spacing_m: float = Field(
+        0.3, gt=0, description="see carry_adapt_inflations: the least travel between two "
+        "confirmations scored against each other, and between two kept to score from (a "
+        "shorter stretch measures the confirmations' own noise) [m]")
+    carry_adapt_max_m: float = Field(
+        6.0, gt=0, description="see carry_adapt_inflations: the most travel between two "
+        "confirmations scored against each other (publish_blend_max_m: no carry is published "
+        "farther) [m]")
+    carry_adapt_halflife_m: float = Field(
+        30.0, gt=0, description="see carry_adapt_inflations: travel after which a scored "
+        "pair counts half [m]")
+    carry_adapt_min_pairs: int = Field(
+        20, ge=1, description="see carry_adapt_inflations: pairs of confirmations scored "
+        "before the choice leaves carry_matcher_inflation")
     carry_wheel_std_per_m: float = Field(
         0.07, gt=0, description="see carry_matcher_inflation: the wheels' step deviation in "
         "translation per metre of the step [m/m] (and 0.15 of it in heading [rad/m]), on top of "
@@ -789,6 +812,24 @@ class LocalizationStack:
         self._carry: np.ndarray | None = None
         self._carry_prev: tuple[np.ndarray, np.ndarray] | None = None
         self._carry_stalled = False
+        # carry_adapt_inflations: the inflations tried (K,), each one's carried pose (K, 3),
+        # the wheels' travel so far [m], their forgotten sums of squared error, the one
+        # published, and the confirmations kept to score from: (pose, carries, travel)
+        infl = self.fusion.carry_adapt_inflations
+        if infl is not None and self.fusion.carry_matcher_inflation is not None:
+            infl = sorted({float(x) for x in infl} | {self.fusion.carry_matcher_inflation})
+            self._carry_inflations = np.asarray(infl, dtype=float)
+        else:
+            self._carry_inflations = None
+        self._carry_travel_m = 0.0
+        self._carry_refs: list[tuple[np.ndarray, np.ndarray, float]] = []
+        self._carry_choice = 0
+        if self._carry_inflations is not None:
+            self._carry_choice = int(np.flatnonzero(
+                self._carry_inflations == self.fusion.carry_matcher_inflation)[0])
+            self._carry_sq = np.zeros(len(self._carry_inflations))
+            self._carry_scored = 0
+            self._carry_scored_at_m = -np.inf
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -811,23 +852,27 @@ class LocalizationStack:
         self._stall_prev, self._stall_motion = None, np.zeros(3)
         self._carry = self._carry_prev = None
         self._carry_stalled = False
+        self._carry_refs = []
         if self.mapper is not None:
             self.mapper.begin_run(run_id)
 
     def _carry_pose(self, odom: np.ndarray, match) -> np.ndarray:
         """The odometry the published pose is carried by (3,): the wheels' ``odom``, or with
         ``carry_matcher_inflation`` the wheels' pose at the run's first scan composed with each
-        step's information-weighted average of the wheels' and the ICP step."""
+        step's information-weighted average of the wheels' and the ICP step (with
+        ``carry_adapt_inflations``, the one of the inflations tried that scores best)."""
         f = self.fusion
         if f.carry_matcher_inflation is None or match is None:
             return odom
+        infl = (self._carry_inflations if self._carry_inflations is not None
+                else np.array([f.carry_matcher_inflation]))
         mpose = np.asarray(match.pose_xytheta, dtype=float)
         if self._carry is None:
-            self._carry = odom.copy()
+            self._carry = np.tile(odom, (len(infl), 1))
         else:
             w_odom, w_match = self._carry_prev
             dw = relative(w_odom, odom)
-            d = dw
+            steps = np.tile(dw, (len(infl), 1))
             still = _wheels_still(dw)
             # through a stall (the wheels exactly still) and at the wheels' catch-up the carry
             # takes the wheels' steps: the matcher falls back on the wheels at a catch-up too
@@ -841,16 +886,57 @@ class LocalizationStack:
                 # the pose's covariance (matcher frame) turned into the base frame
                 c, s = np.cos(mpose[2]), np.sin(mpose[2])
                 R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-                cm = R @ cov @ R.T * f.carry_matcher_inflation
                 t, r = float(np.hypot(dw[0], dw[1])), abs(float(dw[2]))
                 st = f.carry_wheel_std_per_m * t + 0.2 * f.carry_wheel_std_per_rad * r + 2e-3
                 sr = f.carry_wheel_std_per_rad * r + 0.15 * f.carry_wheel_std_per_m * t + 2e-3
                 iw = np.diag([st**-2, st**-2, sr**-2])
-                im = np.linalg.inv(cm + np.diag([1e-6, 1e-6, 1e-8]))
-                d = np.linalg.solve(im + iw, im @ dm + iw @ dw)
-            self._carry = compose(self._carry, d)
+                for k, x in enumerate(infl):
+                    cm = R @ cov @ R.T * x
+                    im = np.linalg.inv(cm + np.diag([1e-6, 1e-6, 1e-8]))
+                    steps[k] = np.linalg.solve(im + iw, im @ dm + iw @ dw)
+            for k in range(len(infl)):
+                self._carry[k] = compose(self._carry[k], steps[k])
+            self._carry_travel_m += float(np.hypot(dw[0], dw[1]))
         self._carry_prev = (odom.copy(), mpose.copy())
-        return self._carry.copy()
+        return self._carry[self._carry_choice].copy()
+
+    def _score_carries(self, confirmed: np.ndarray) -> None:
+        """``carry_adapt_inflations``: a tight confirmation (3,) scores each carry's pose
+        carried from the earlier confirmations kept, and the best-scoring carry is published
+        from here on."""
+        if self._carry_inflations is None or self._carry is None:
+            return
+        f = self.fusion
+        now = self._carry_travel_m
+        self._carry_refs = [r for r in self._carry_refs if now - r[2] <= f.carry_adapt_max_m]
+        if now - self._carry_scored_at_m >= f.carry_adapt_spacing_m:
+            pairs = [r for r in self._carry_refs if now - r[2] >= f.carry_adapt_spacing_m]
+            if pairs:
+                self._carry_sq *= 0.5 ** ((now - max(self._carry_scored_at_m, 0.0))
+                                          / f.carry_adapt_halflife_m)
+                for c_ref, carries_ref, _ in pairs:
+                    for k in range(len(self._carry_inflations)):
+                        e = relative(confirmed, compose(c_ref, relative(carries_ref[k],
+                                                                        self._carry[k])))
+                        self._carry_sq[k] += e[0] ** 2 + e[1] ** 2 + e[2] ** 2  # 1 m/rad
+                self._carry_scored += len(pairs)
+                self._carry_scored_at_m = now
+                if self._carry_scored >= f.carry_adapt_min_pairs:
+                    self._carry_choice = int(np.argmin(self._carry_sq))
+        if not self._carry_refs or now - self._carry_refs[-1][2] >= f.carry_adapt_spacing_m:
+            self._carry_refs.append((np.array(confirmed, dtype=float), self._carry.copy(), now))
+
+    def _carry_pose_now(self, carry: np.ndarray) -> np.ndarray:
+        """The chosen carry's pose (3,) at this scan; ``carry`` when it is the wheels'."""
+        return carry if self._carry is None else self._carry[self._carry_choice].copy()
+
+    @property
+    def carry_inflation(self) -> float | None:
+        """The scan matcher's covariance inflation the published pose is carried with now
+        (``carry_adapt_inflations``' choice, else ``carry_matcher_inflation``)."""
+        if self._carry_inflations is not None:
+            return float(self._carry_inflations[self._carry_choice])
+        return self.fusion.carry_matcher_inflation
 
     def _through_stall(self, scan: Scan, match) -> np.ndarray:
         """``publish_through_stalls``: the matcher's motion (3,) (base frame) since the wheels
@@ -1200,6 +1286,9 @@ class LocalizationStack:
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
+            if publish_confirmed is not None and self._carry_inflations is not None:
+                self._score_carries(publish_confirmed)
+                carry = self._carry_pose_now(carry)
             published = self._aligned_pose(published, carry, publish_confirmed)
         if self.anchor is not None and self.fusion.publish_anchor_when_apart:
             # the sharp filter slides onto moved furniture before the anchor test restarts it

@@ -724,8 +724,11 @@ def _publishing_run(fusion: FusionConfig, confident: list[int], off_at: dict | N
     loc = _OffAtLocalizer(truth, confident, bias, off_at or {})
     if stack_kw.get("initial_pose_xytheta") == "truth":
         stack_kw["initial_pose_xytheta"] = truth[0]
+    observe = stack_kw.pop("observe", None)
     stack = LocalizationStack(loc, None if matcher is None else matcher(truth), _MapOnly(grid),
                               fusion, **stack_kw)
+    if observe is not None:
+        observe["stack"] = stack
     stack.begin_run(1)
     odom = truth.copy()
     odom[:, :2] = truth[0, :2] + odom_scale * (truth[:, :2] - truth[0, :2])
@@ -786,6 +789,55 @@ def test_the_confirmed_pose_is_carried_by_the_wheels_and_the_matchers_steps(infl
         assert np.all(err[1:6] < 0.5 * 0.1 * travel[1:6])  # half the wheels' error at most
     else:
         np.testing.assert_allclose(err[1:6], 0.1 * travel[1:6], atol=0.004)
+
+
+class _NoisyIcpMatcher(_IcpMatcher):
+    """:class:`_IcpMatcher` whose steps each err by a draw of 1.5 cm along and across (seeded)
+    while its covariance still claims ``std_m``."""
+
+    def __init__(self, truth, std_m: float):
+        super().__init__(truth, std_m)
+        self.walk = np.zeros(3)
+        self.rng = np.random.default_rng(4)
+
+    def register(self, scan):
+        res = super().register(scan)
+        self.walk = compose(self.walk, np.r_[self.rng.normal(0.0, 0.015, 2), 0.0])
+        return _IcpResult(compose(res.pose_xytheta, self.walk), res.cov, res.used_icp)
+
+
+@pytest.mark.parametrize("case", ["long_wheels", "noisy_matcher"])
+def test_the_carry_learns_which_of_wheels_and_matcher_to_trust(case):
+    """``carry_adapt_inflations``: confirmed every 4 scans (36 cm), each carry's pose carried
+    from one confirmation is scored at the next. Wheels 10 % long beside an exact matcher that
+    claims 5 mm: the least inflation (the matcher trusted most) wins. Exact wheels beside a
+    matcher whose steps err by 1.5 cm while it claims 5 mm: the largest (the wheels). Either
+    way the poses published between the later confirmations are nearer the truth than with the
+    fixed inflation of 3."""
+    confident = list(range(0, 30, 4))
+    if case == "long_wheels":
+        def matcher(t):
+            return _IcpMatcher(t, 0.005)
+        odom_scale, want = 1.1, 1.0
+    else:
+        def matcher(t):
+            return _NoisyIcpMatcher(t, 0.005)
+        odom_scale, want = 1.0, 100.0
+    errs, seen = {}, {}
+    for adapt in (None, [1.0, 10.0, 100.0]):
+        fusion = FusionConfig(publish_pose="aligned", publish_carry_m=0.5,
+                              confident_for_m=0.0, carry_matcher_inflation=3.0,
+                              carry_adapt_inflations=adapt, carry_adapt_min_pairs=2,
+                              absence_max_std_xy_m=0.1, absence_max_std_theta_deg=3.0)
+        truth, _, out = _publishing_run(fusion, confident, matcher=matcher,
+                                        odom_scale=odom_scale, observe=seen)
+        assert [i for i, o in enumerate(out) if o.gatmo_pose_verified] == confident
+        published = np.array([o.pose_xytheta for o in out])
+        err = np.hypot(*(published[:, :2] - truth[:, :2]).T)
+        between = [i for i in range(13, 30) if i not in confident]
+        errs[adapt is not None] = float(np.sqrt(np.mean(err[between] ** 2)))
+    assert seen["stack"].carry_inflation == want
+    assert errs[True] < 0.8 * errs[False], errs
 
 
 @pytest.mark.parametrize("publish", ["localizer", "aligned"])
