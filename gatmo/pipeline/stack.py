@@ -812,24 +812,22 @@ class LocalizationStack:
         self._carry: np.ndarray | None = None
         self._carry_prev: tuple[np.ndarray, np.ndarray] | None = None
         self._carry_stalled = False
-        # carry_adapt_inflations: the inflations tried (K,), each one's carried pose (K, 3),
-        # the wheels' travel so far [m], their forgotten sums of squared error, the one
-        # published, and the confirmations kept to score from: (pose, carries, travel)
-        infl = self.fusion.carry_adapt_inflations
-        if infl is not None and self.fusion.carry_matcher_inflation is not None:
-            infl = sorted({float(x) for x in infl} | {self.fusion.carry_matcher_inflation})
-            self._carry_inflations = np.asarray(infl, dtype=float)
-        else:
-            self._carry_inflations = None
+        # carry_matcher_inflation: the inflations carried with (K,: carry_adapt_inflations'
+        # and carry_matcher_inflation, or this one alone), each one's carried pose (K, 3),
+        # the wheels' travel so far [m], the forgotten sums of squared error (K,), the pairs
+        # scored, the travel at the last scoring, the one published, and the confirmations
+        # kept to score from: (pose, carries, travel)
+        f = self.fusion
+        infl = {f.carry_matcher_inflation} | set(f.carry_adapt_inflations or ())
+        self._carry_inflations = np.array(sorted(float(x) for x in infl if x is not None))
+        self._carry_adapt = f.carry_adapt_inflations is not None and len(infl) > 1
+        self._carry_choice = int(np.searchsorted(self._carry_inflations,
+                                                 f.carry_matcher_inflation or 0.0))
         self._carry_travel_m = 0.0
+        self._carry_sq = np.zeros(len(self._carry_inflations))
+        self._carry_scored = 0
+        self._carry_scored_at_m = 0.0
         self._carry_refs: list[tuple[np.ndarray, np.ndarray, float]] = []
-        self._carry_choice = 0
-        if self._carry_inflations is not None:
-            self._carry_choice = int(np.flatnonzero(
-                self._carry_inflations == self.fusion.carry_matcher_inflation)[0])
-            self._carry_sq = np.zeros(len(self._carry_inflations))
-            self._carry_scored = 0
-            self._carry_scored_at_m = -np.inf
 
     def begin_run(self, run_id: int) -> None:
         """Start a new log: the matcher's frame is new, the object map carries over."""
@@ -864,8 +862,7 @@ class LocalizationStack:
         f = self.fusion
         if f.carry_matcher_inflation is None or match is None:
             return odom
-        infl = (self._carry_inflations if self._carry_inflations is not None
-                else np.array([f.carry_matcher_inflation]))
+        infl = self._carry_inflations
         mpose = np.asarray(match.pose_xytheta, dtype=float)
         if self._carry is None:
             self._carry = np.tile(odom, (len(infl), 1))
@@ -890,9 +887,9 @@ class LocalizationStack:
                 st = f.carry_wheel_std_per_m * t + 0.2 * f.carry_wheel_std_per_rad * r + 2e-3
                 sr = f.carry_wheel_std_per_rad * r + 0.15 * f.carry_wheel_std_per_m * t + 2e-3
                 iw = np.diag([st**-2, st**-2, sr**-2])
+                cov_base = R @ cov @ R.T
                 for k, x in enumerate(infl):
-                    cm = R @ cov @ R.T * x
-                    im = np.linalg.inv(cm + np.diag([1e-6, 1e-6, 1e-8]))
+                    im = np.linalg.inv(cov_base * x + np.diag([1e-6, 1e-6, 1e-8]))
                     steps[k] = np.linalg.solve(im + iw, im @ dm + iw @ dw)
             for k in range(len(infl)):
                 self._carry[k] = compose(self._carry[k], steps[k])
@@ -904,7 +901,7 @@ class LocalizationStack:
         """``carry_adapt_inflations``: a tight confirmation (3,) scores each carry's pose
         carried from the earlier confirmations kept, and the best-scoring carry is published
         from here on."""
-        if self._carry_inflations is None or self._carry is None:
+        if self._carry is None:
             return
         f = self.fusion
         now = self._carry_travel_m
@@ -912,7 +909,7 @@ class LocalizationStack:
         if now - self._carry_scored_at_m >= f.carry_adapt_spacing_m:
             pairs = [r for r in self._carry_refs if now - r[2] >= f.carry_adapt_spacing_m]
             if pairs:
-                self._carry_sq *= 0.5 ** ((now - max(self._carry_scored_at_m, 0.0))
+                self._carry_sq *= 0.5 ** ((now - self._carry_scored_at_m)
                                           / f.carry_adapt_halflife_m)
                 for c_ref, carries_ref, _ in pairs:
                     for k in range(len(self._carry_inflations)):
@@ -926,17 +923,13 @@ class LocalizationStack:
         if not self._carry_refs or now - self._carry_refs[-1][2] >= f.carry_adapt_spacing_m:
             self._carry_refs.append((np.array(confirmed, dtype=float), self._carry.copy(), now))
 
-    def _carry_pose_now(self, carry: np.ndarray) -> np.ndarray:
-        """The chosen carry's pose (3,) at this scan; ``carry`` when it is the wheels'."""
-        return carry if self._carry is None else self._carry[self._carry_choice].copy()
-
     @property
     def carry_inflation(self) -> float | None:
         """The scan matcher's covariance inflation the published pose is carried with now
         (``carry_adapt_inflations``' choice, else ``carry_matcher_inflation``)."""
-        if self._carry_inflations is not None:
-            return float(self._carry_inflations[self._carry_choice])
-        return self.fusion.carry_matcher_inflation
+        if self.fusion.carry_matcher_inflation is None:
+            return None
+        return float(self._carry_inflations[self._carry_choice])
 
     def _through_stall(self, scan: Scan, match) -> np.ndarray:
         """``publish_through_stalls``: the matcher's motion (3,) (base frame) since the wheels
@@ -1286,9 +1279,9 @@ class LocalizationStack:
         if self.fusion.publish_pose == "fused":
             published = pose
         elif self.fusion.publish_pose == "aligned":
-            if publish_confirmed is not None and self._carry_inflations is not None:
+            if publish_confirmed is not None and self._carry_adapt and self._carry is not None:
                 self._score_carries(publish_confirmed)
-                carry = self._carry_pose_now(carry)
+                carry = self._carry[self._carry_choice].copy()
             published = self._aligned_pose(published, carry, publish_confirmed)
         if self.anchor is not None and self.fusion.publish_anchor_when_apart:
             # the sharp filter slides onto moved furniture before the anchor test restarts it
