@@ -3,8 +3,9 @@ furniture rearranged every time. Per run: objects placed in the map vs pieces in
 and what those objects stand on (``map_census``: a piece, a second object on a piece, nothing),
 peak RSS, ms per scan, localization error (and the static-map localizer's on the same log,
 the peer), and the relocations (moved pieces found with their
-id at the true pose, false relocations, the fraction of the map's pieces placed right). What
-must stay flat stays flat, or it shows here.
+id at the true pose, false relocations, the fraction of the map's pieces placed right); the
+scans GATMO took from trusted poses and, of the pieces no object stands on, those the run saw
+at all (``pieces_unmapped_seen``). What must stay flat stays flat, or it shows here.
 
     python -m benchmarks.bench_soak [--runs 50] [--seconds 30] [--seed 11] [--set KEY=VALUE ...]
         [--tag NAME]
@@ -33,7 +34,7 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
     from gatmo.maps.io import load_map
     from gatmo.objects.mapper import GatmoMapper
     from gatmo.pipeline.config import sim_stack_config
-    from gatmo.pipeline.evaluate import map_census, score_run, tie_objects
+    from gatmo.pipeline.evaluate import map_census, score_run, tie_objects, unmapped_seen
     from gatmo.pipeline.runs import make_full_stack, make_localizer
 
     tmp = tmp or Path(tempfile.mkdtemp())
@@ -58,10 +59,12 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
         err = []
         events = []
         step_ms = []  # the stack's own work per scan; the evaluation below is not timed
+        trusted = 0  # scans GATMO took from a pose the stack trusted
         for s in scans:
             t0 = time.perf_counter()
             st = stack.step(s)
             step_ms.append((time.perf_counter() - t0) * 1e3)
+            trusted += st.gatmo_pose_xytheta is not None
             err.append(np.hypot(*(st.pose_xytheta[:2] - s.gt_pose_xytheta[:2])))
             events += [e.as_dict() for e in st.events]
         why = stale_why(mapper, stale0, scans, events)
@@ -98,6 +101,9 @@ def soak(runs: int, seconds: float, seed: int = 11, tmp: Path | None = None,
             "map_correct_fraction": score["map_correct_fraction"],
             **{key: v for key, v in census.items() if key != "stale_ids"},
             "stale_withheld": stale_withheld,
+            # of the pieces no object stands on, those the run saw (the rest it never did)
+            "pieces_unmapped_seen": unmapped_seen(om, doc, k + 1, scans),
+            "gatmo_scans": trusted,
             "seen_through_scans": mapper.counts["seen_through_scans"] - seen0,
             **why,
         })
@@ -164,6 +170,11 @@ def summary(rows: list[dict], first: int = 10) -> dict:
             # session have no such count)
             "stale_withheld_mean": float(np.mean([r.get("stale_withheld", np.nan)
                                                   for r in sel])),
+            # (rows before the seventy-third session have neither count)
+            "pieces_unmapped_mean": float(np.mean([r["pieces_unmapped"] for r in sel])),
+            "pieces_unmapped_seen_mean": float(np.mean([r.get("pieces_unmapped_seen", np.nan)
+                                                        for r in sel])),
+            "gatmo_scans_mean": float(np.mean([r.get("gatmo_scans", np.nan) for r in sel])),
         }
     out["stale_why_sum"] = {k: int(sum(r.get(k, 0) for r in rows))
                             for k in ("stale_at_start", "stale_absent", "stale_unseen",

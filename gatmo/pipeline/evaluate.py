@@ -335,21 +335,15 @@ def piece_views(scans, piece_old: dict, piece_new: dict | None,
     # the work (a piece is seen through by a few of a scan's rays at most)
     centre = old_xy.mean(axis=0)
     reach = float(np.max(np.hypot(*(old_xy - centre).T))) + 0.03 + 1e-9
-    tnew = None
-    if piece_new is not None:
-        tnew = cKDTree(transform_points(np.array(piece_new["pose"]),
-                                        _piece_points(piece_new, res)))
     n = len(scans)
-    old, new = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    new = scans_seeing(scans, piece_new, res) if piece_new is not None else np.zeros(n, bool)
+    old = np.zeros(n, dtype=bool)
     for i, s in enumerate(scans):
         lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
         r = s.ranges_m
         a = lp[2] + s.angles_rad
         u = np.stack([np.cos(a), np.sin(a)], 1)
         valid = r < s.range_max_m
-        if tnew is not None:
-            d, _ = tnew.query(lp[:2] + r[valid, None] * u[valid], distance_upper_bound=0.06)
-            new[i] = np.isfinite(d).sum() >= 8
         rr = np.where(valid, r, s.range_max_m) - 0.1
         along = np.clip((centre - lp[:2]) @ u.T, 0.0, np.maximum(rr, 0.0))
         near = np.hypot(*(lp[:2] + along[:, None] * u - centre).T) <= reach
@@ -357,6 +351,34 @@ def piece_views(scans, piece_old: dict, piece_new: dict | None,
             continue
         old[i] = _rays_crossing(told, lp[:2], u[near], rr[near], s.range_max_m) >= 5
     return old, new
+
+
+def scans_seeing(scans, piece: dict, res: float = 0.05, min_returns: int = 8) -> np.ndarray:
+    """(N,) bool: the scans of a run (with ground-truth poses) that saw a piece standing as in
+    scenario.json, at least ``min_returns`` returns within 0.06 m of its footprint."""
+    tree = cKDTree(transform_points(np.array(piece["pose"]), _piece_points(piece, res)))
+    out = np.zeros(len(scans), dtype=bool)
+    for i, s in enumerate(scans):
+        lp = compose(s.gt_pose_xytheta, s.laser_pose_xytheta)
+        r = s.ranges_m
+        valid = r < s.range_max_m
+        a = lp[2] + s.angles_rad[valid]
+        pts = lp[:2] + r[valid, None] * np.stack([np.cos(a), np.sin(a)], 1)
+        d, _ = tree.query(pts, distance_upper_bound=0.06)
+        out[i] = np.isfinite(d).sum() >= min_returns
+    return out
+
+
+def unmapped_seen(object_map, scenario: dict, run: int, scans, min_scans: int = 5,
+                  near_m: float = 0.1) -> int:
+    """Of the pieces of run ``run``'s layout that no placed object stands on
+    (:func:`map_census`' ``pieces_unmapped``), how many the run's ``scans`` saw
+    (:func:`scans_seeing` in ``min_scans`` scans, as :func:`observed` counts a new place
+    seen): the unmapped pieces GATMO had a chance at in the run, the rest it never saw."""
+    res = scenario.get("resolution_m", 0.05)
+    on, _ = objects_on_pieces(object_map, scenario, run, near_m)
+    return sum(int(scans_seeing(scans, p, res).sum() >= min_scans)
+               for p in scenario["runs"][run - 1]["objects"] if p["id"] not in on)
 
 
 def _rays_crossing(tree: cKDTree, origin_xy: np.ndarray, u: np.ndarray, free_m: np.ndarray,

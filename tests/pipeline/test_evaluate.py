@@ -191,6 +191,25 @@ def test_map_census_counts_duplicates_stale_objects_and_unmapped_pieces():
     assert [o.id for o in off] == [4, 5, 10, 11]
 
 
+def test_unmapped_seen_counts_the_unmapped_pieces_the_run_saw():
+    """Two boxes stand, neither in the object map; the robot at (1, 4) looking along +x sees
+    the one in front of it and not the one behind it. A piece with an object on it is not
+    unmapped, seen or not."""
+    from gatmo.objects.objectmap import ObjectMap
+    from gatmo.pipeline.evaluate import scans_seeing, unmapped_seen
+
+    ahead, behind = _piece(1, (3.0, 4.0, 0.0)), _piece(2, (0.4, 1.0, 0.0))
+    world = room_grid(10.0, 8.0, boxes=[(2.75, 3.75, 3.25, 4.25), (0.15, 0.75, 0.65, 1.25)])
+    scans = [make_scan(world, (1.0, 4.0, 0.0), n_beams=361, max_range_m=8.0)
+             for _ in range(5)]
+    assert scans_seeing(scans, ahead).all() and not scans_seeing(scans, behind).any()
+    scen = {"runs": [{"objects": [ahead, behind]}]}
+    assert unmapped_seen(ObjectMap([], 0.05), scen, 1, scans) == 1
+    assert unmapped_seen(ObjectMap([], 0.05), scen, 1, scans[:4]) == 0  # 5 scans needed
+    mapped = ObjectMap([_box_object([3.0, 4.0, 0.0])], 0.05)  # the box ahead is mapped
+    assert unmapped_seen(mapped, scen, 1, scans) == 0
+
+
 def test_seen_through_counts_points_a_true_beam_passed():
     """Points between the laser and a wall are seen through, points behind the wall or
     beyond the range limit are not; a scan counts when it saw through 30 % of them."""
