@@ -170,8 +170,9 @@ def summary(rows: list[dict], first: int = 10) -> dict:
             # session have no such count)
             "stale_withheld_mean": float(np.mean([r.get("stale_withheld", np.nan)
                                                   for r in sel])),
-            # (rows before the seventy-third session have neither count)
             "pieces_unmapped_mean": float(np.mean([r["pieces_unmapped"] for r in sel])),
+            # of them, seen in the run; and GATMO's scans (rows before the seventy-third
+            # session have neither count)
             "pieces_unmapped_seen_mean": float(np.mean([r.get("pieces_unmapped_seen", np.nan)
                                                         for r in sel])),
             "gatmo_scans_mean": float(np.mean([r.get("gatmo_scans", np.nan) for r in sel])),
