@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from gatmo.geometry import points_to_beams
+
 # Points scatter around a person's centre (two legs ~0.25 m apart): the person likelihood uses
 # the KF's centre covariance plus this spread, or every point but the centre would be
 # "impossible" for a walking person.
@@ -32,6 +34,9 @@ class Metaobject:
         self.first_seen = stamp_s
         self.last_seen = stamp_s
         self.evidence: dict[tuple[int, int], int] = {}
+        # per evidence cell, the later scans whose beams went on well beyond it (seen
+        # through: what stood there left; :meth:`note_passes`)
+        self.passes: dict[tuple[int, int], int] = {}
         # the same grid from the scans whose pose an independent check confirmed only
         self.evidence_verified: dict[tuple[int, int], int] = {}
         self.n_verified = 0  # observations from independently confirmed poses
@@ -135,13 +140,23 @@ class Metaobject:
         # size); a person keeps going
         # (the KF's speed is no verdict: the visible part of a still object changes with the
         # viewpoint and its centroid jumps by tenths of a metre between scans)
-        if self.travel_m() > 1.2 or (self.n_obs >= 5 and self.speed_mps > 0.8):
+        if self.moving():
             return "person"
         if self.n_obs < self.cfg.chair_min_scans:
             return "unknown"
+        vmax = self.cfg.still_max_vacated
+        if vmax is not None and self.vacated() > vmax:
+            # beyond the paper: where it stood was seen through since; whatever its chair
+            # likelihood (a walker's few returns fit any grid), it left
+            return "person"
         if self.ll_chair >= self.ll_person:
             return "chair"
         return "person"
+
+    def moving(self) -> bool:
+        """Its centre travelled more than 1.2 m, or the person filter's speed passed 0.8 m/s
+        after 5 scans: the person hypothesis keeps going (paper, Sec. IV)."""
+        return self.travel_m() > 1.2 or (self.n_obs >= 5 and self.speed_mps > 0.8)
 
     def concentration(self) -> float:
         """Share of the evidence (hits summed over cells) on cells hit in at least
@@ -154,12 +169,55 @@ class Metaobject:
         return float(ev[ev >= self.cfg.still_min_hits].sum() / ev.sum())
 
     def still_though_moving(self) -> bool:
-        """Called a person for its motion only (its centre travelled, :meth:`dominant`) while
-        its evidence is concentrated (``still_min_concentration``): pieces side by side seen
-        in turn from a moving robot."""
-        return (self.n_obs >= self.cfg.chair_min_scans and self.dominant() == "person"
-                and self.ll_chair >= self.ll_person
-                and self.concentration() >= self.cfg.still_min_concentration)
+        """Called a person for its motion only (its centre travelled, :meth:`moving`) while
+        its evidence is concentrated (``still_min_concentration``), or with
+        ``still_max_vacated`` while nothing saw through where it stood and its cells were hit
+        again (``still_vacated_min_concentration``): pieces side by side, or a desk, seen in
+        parts from a moving robot."""
+        c = self.cfg
+        if not (self.n_obs >= c.chair_min_scans and self.moving()
+                and self.ll_chair >= self.ll_person):
+            return False
+        if c.still_max_vacated is None:
+            return self.concentration() >= c.still_min_concentration
+        # beyond the paper: nothing saw through where it stood, and its cells were hit again
+        # (a person walking at the laser hides their trail instead)
+        return (self.vacated() <= c.still_max_vacated
+                and self.concentration() >= c.still_vacated_min_concentration)
+
+    def note_passes(self, view: tuple, through_m: float) -> None:
+        """Count the evidence cells the scan ``view`` (laser pose (3,) map frame, beam angles
+        (B,) sorted [rad], ranges (B,) [m], reach [m], as :attr:`views`) saw through: the beam
+        nearest the cell and both its neighbours end more than ``through_m`` beyond it. Beyond
+        the paper: where a person stood, the next scans see the wall behind; a still thing
+        seen in parts from a moving robot is hit or hidden, never seen through. The
+        neighbours keep a beam grazing a still thing's outline (pose jitter) from counting."""
+        lp, angles, ranges, reach = view
+        if not self.evidence or len(angles) < 3:
+            return
+        keys = np.array(list(self.evidence), dtype=np.int64)
+        rk, bk, j = points_to_beams((keys + 0.5) * self.res, lp, angles)
+        half = 0.5 * np.abs(np.diff(angles)).mean()
+        r = np.where(np.isnan(ranges), -np.inf, ranges)
+        jm, jp = np.maximum(j - 1, 0), np.minimum(j + 1, len(angles) - 1)
+        past = rk + through_m
+        seen = ((rk <= reach) & (np.abs(angles[j] - bk) <= half) & (j > 0)
+                & (j < len(angles) - 1) & (r[j] > past) & (r[jm] > past) & (r[jp] > past))
+        for k in map(tuple, keys[seen].tolist()):
+            self.passes[k] = self.passes.get(k, 0) + 1
+
+    def vacated(self) -> float:
+        """Share of the evidence (hits summed over cells) on cells seen through in as many
+        later scans as hit them or more (:meth:`note_passes`): near 1 for a walking person's
+        trail, near 0 for a still thing however its centre wandered."""
+        if not self.evidence:
+            return 0.0
+        tot = gone = 0
+        for k, v in self.evidence.items():
+            tot += v
+            if self.passes.get(k, 0) >= v:
+                gone += v
+        return gone / tot
 
     def chair_points(self, min_count: int = 2, min_fraction: float = 0.05,
                      verified: bool = False) -> np.ndarray:
@@ -214,6 +272,8 @@ class Metaobject:
         self.scan_points = (self.scan_points + other.scan_points)[-48:]
         for k, v in other.evidence.items():
             self.evidence[k] = self.evidence.get(k, 0) + v
+        for k, v in other.passes.items():
+            self.passes[k] = self.passes.get(k, 0) + v
         for k, v in other.evidence_verified.items():
             self.evidence_verified[k] = self.evidence_verified.get(k, 0) + v
         self.n_obs = max(self.n_obs, other.n_obs)

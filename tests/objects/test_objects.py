@@ -340,6 +340,66 @@ def test_two_still_pieces_seen_in_turn_are_still_though_the_centre_wanders():
     assert not walker.still_though_moving()
 
 
+def _track_of(frames, cfg, fov_rad=np.pi, max_range_m=4.0, noise_m=0.0) -> Metaobject:
+    """A track fed as the mapper feeds one: per frame (world, laser pose, box (xmin, ymin,
+    xmax, ymax) holding the thing tracked), the scan's returns in the box, then the scan's
+    view (:meth:`Metaobject.note_passes`)."""
+    m = None
+    for k, (world, pose, (x0, y0, x1, y1)) in enumerate(frames):
+        s = make_scan(world, pose, fov_rad=fov_rad, max_range_m=max_range_m, stamp_s=0.1 * k,
+                      noise_m=noise_m, rng=np.random.default_rng(k))
+        a = pose[2] + s.angles_rad
+        pts = np.asarray(pose[:2]) + s.ranges_m[:, None] * np.stack([np.cos(a), np.sin(a)], 1)
+        pts = pts[(s.ranges_m < max_range_m) & (pts[:, 0] >= x0) & (pts[:, 0] <= x1)
+                  & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)]
+        if m is None:
+            m = Metaobject(1, pts, 0.1 * k, cfg, 0.05)
+        else:
+            m.update(pts, 0.1 * k)
+        m.note_passes((np.asarray(pose, float), s.angles_rad, s.ranges_m, max_range_m - 0.2),
+                      cfg.match_through_m)
+    return m
+
+
+def test_a_walkers_trail_is_seen_through_and_a_desk_seen_in_parts_is_not():
+    """``still_max_vacated``: a desk seen in parts by a robot driving past (a 60 deg laser, 4
+    cm range noise, 0.3 m between scans: the visible part slides along it, the centre
+    wanders more than 1.2 m, and its concentration falls under ``still_min_concentration``)
+    is still, as nothing sees through where it stood; a person walking slowly across the
+    laser's view, whose returns fit the chair grid, leaves cells the next scans see through;
+    one walking straight at the laser hides their trail, and is not still because its cells
+    are not hit again (``still_vacated_min_concentration``)."""
+    cfg = CFG.model_copy(update={"still_max_vacated": 0.2})
+    desk = (3.0, 3.0, 7.0, 3.5)
+    world = room_grid(10, 6, 0.05, boxes=[desk])
+    drive = [(world, (3.0 + 0.3 * k, 1.5, np.pi / 2), desk) for k in range(14)]
+    m = _track_of(drive, cfg, fov_rad=np.radians(60), noise_m=0.04)
+    assert m.travel_m() > 1.2 and m.vacated() < 0.05
+    assert m.concentration() < CFG.still_min_concentration
+    assert m.dominant() == "person" and m.still_though_moving()
+    m.cfg = CFG
+    assert not m.still_though_moving()
+
+    def person(x, y):
+        return room_grid(10, 6, 0.05, boxes=[(x - 0.15, y - 0.15, x + 0.15, y + 0.15)])
+
+    across = [(person(3.5 + 0.05 * k, 3.5), (5.0, 1.0, np.pi / 2), (2.5, 3.0, 7.5, 4.0))
+              for k in range(20)]
+    w = _track_of(across, cfg)
+    assert w.vacated() > 0.3 and w.dominant() == "person" and not w.still_though_moving()
+    w.cfg = CFG
+    assert w.ll_chair > w.ll_person and w.dominant() == "chair"
+    # at 0.5 m/s its returns fit the chair grid better than the person filter
+    towards = [(person(5.0, 4.5 - 0.05 * k), (5.0, 1.0, np.pi / 2), (4.5, 1.5, 5.5, 5.0))
+               for k in range(30)]
+    w = _track_of(towards, cfg)
+    assert w.vacated() < 0.2 and w.travel_m() > 1.2 and w.ll_chair > w.ll_person
+    assert w.concentration() < cfg.still_vacated_min_concentration
+    assert w.dominant() == "person" and not w.still_though_moving()
+    w.cfg = cfg.model_copy(update={"still_vacated_min_concentration": 0.0})
+    assert w.still_though_moving()
+
+
 @pytest.mark.parametrize("still_to_gamma", [False, True])
 def test_still_pieces_called_a_person_join_gamma_with_still_to_gamma(still_to_gamma):
     """Such a track, ending with the run, becomes a new object with ``still_to_gamma`` (the
