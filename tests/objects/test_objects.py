@@ -1006,16 +1006,20 @@ def test_returns_missing_one_object_by_an_offset_are_singled_out():
     assert not m.offset_at(ends(truth, truth + [0.2, 0.15, 0.0])).any()
 
 
-def test_a_person_walking_through_the_room_never_becomes_a_map_object():
+@pytest.mark.parametrize("still_max_vacated", [None, 0.2])
+def test_a_person_walking_through_the_room_never_becomes_a_map_object(still_max_vacated):
     """Two legs (0.1 m squares) walk 4 m at 1 m/s, then leave, in front of a robot that drives
     along with a true pose: GATMO tracks them as a person (counted when the track expires)
     and, at the end of the run, adds nothing of them to the map, marks nothing absent and
     relocates nothing; a box standing still in the same run is added (so the run could add
-    objects)."""
+    objects). The same with the person test of what later scans saw through
+    (``still_max_vacated``)."""
     grid = room_grid(10, 6, 0.05)
-    m = GatmoMapper.from_config(CFG, grid)
+    cfg = CFG.model_copy(update={"still_max_vacated": still_max_vacated})
+    m = GatmoMapper.from_config(cfg, grid)
     m.begin_run(1)
     events = []
+    vacated = 0.0  # the most of a track's evidence seen through (Metaobject.vacated)
     for i in range(100):
         t = 0.1 * i
         world = room_grid(10, 6, 0.05, boxes=[(6.0, 4.6, 6.5, 5.1)])
@@ -1027,8 +1031,11 @@ def test_a_person_walking_through_the_room_never_becomes_a_map_object():
         pose = np.array([1.5 + 0.05 * i, 3.5, -0.3])
         s = make_scan(world, pose, n_beams=361, fov_rad=2 * np.pi, max_range_m=6.0, stamp_s=t)
         events += m.update(pose, s, pose_confident=True, stamp_s=t)
+        vacated = max([vacated] + [tr.vacated() for tr in m._meta])
     events += m.end_run()
     assert m.counts["persons"] >= 1
+    # the mapper gives its tracks each scan's view: the legs' trail is seen through
+    assert (vacated > 0.5) == (still_max_vacated is not None)
     kinds = [e.kind for e in events]
     assert "absent" not in kinds and "relocated" not in kinds
     added = [o for o in m.object_map.objects if o.status == "M" and not o.structure]
