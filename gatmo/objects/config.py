@@ -205,14 +205,19 @@ class GatmoConfig(GatmoModel):
         "still_min_hits scans or more that makes it still")
     still_min_hits: int = Field(3, ge=2, description="hits that make a cell's evidence firm")
     still_max_vacated: float | None = Field(
+        None, ge=0, le=1, description="beyond the paper: with a value, a track called a person "
+        "for its motion only is still (still_to_gamma) when at most this share of its evidence "
+        "lies on cells later scans saw through (Metaobject.vacated) and its concentration "
+        "reaches still_vacated_min_concentration, instead of still_min_concentration. At the "
+        "true poses of tuning halls 300-308 (36 runs): tracks on pieces 0.03 at most (165), "
+        "off them 0.26 or more but 4 of 119. None: the concentration alone")
+    person_min_vacated: float | None = Field(
         None, ge=0, le=1, description="beyond the paper: with a value, a track of "
         "chair_min_scans scans or more with more than this share of its evidence on cells "
         "later scans saw through (Metaobject.vacated) is a person, however well its returns "
-        "fit its chair grid; and a track called a person for its motion only is still "
-        "(still_to_gamma) when it is at or under this share and its concentration reaches "
-        "still_vacated_min_concentration, instead of still_min_concentration. None: neither. "
-        "At the true poses of tuning halls 300-308 (36 runs): tracks on pieces 0.03 at most "
-        "(151), off them 0.26 or more but 4 of 105")
+        "fit its chair grid (people walking slowly). Off: at 0.2 on hall seeds 400-419 twin "
+        "swaps +0.35 per seed and noticed gone -4 points (docs/experiments.md, seventy-fourth "
+        "session)")
     still_vacated_min_concentration: float = Field(
         0.6, ge=0, le=1, description="with still_max_vacated: the concentration "
         "(Metaobject.concentration) a track called a person for its motion needs to be still: "

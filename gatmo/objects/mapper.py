@@ -1230,7 +1230,8 @@ class GatmoMapper:
         median range [m] of ``points_xy`` (its returns in this scan, map frame) from the laser."""
         if self._view is None:
             return
-        if self.cfg.still_max_vacated is not None:  # its only use (Metaobject.vacated)
+        if (self.cfg.still_max_vacated is not None
+                or self.cfg.person_min_vacated is not None):  # for Metaobject.vacated only
             m.note_passes(self._view, self.cfg.match_through_m)
         m.add_view(self._view)
         r = float(np.median(np.hypot(*(points_xy - self._view[0][:2]).T)))

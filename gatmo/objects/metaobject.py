@@ -144,8 +144,8 @@ class Metaobject:
             return "person"
         if self.n_obs < self.cfg.chair_min_scans:
             return "unknown"
-        vmax = self.cfg.still_max_vacated
-        if vmax is not None and self.vacated() > vmax:
+        vmin = self.cfg.person_min_vacated
+        if vmin is not None and self.vacated() > vmin:
             # beyond the paper: where it stood was seen through since; whatever its chair
             # likelihood (a walker's few returns fit any grid), it left
             return "person"

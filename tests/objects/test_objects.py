@@ -366,7 +366,8 @@ def test_a_walkers_trail_is_seen_through_and_a_desk_seen_in_parts_is_not():
     cm range noise, 0.3 m between scans: the visible part slides along it, the centre
     wanders more than 1.2 m, and its concentration falls under ``still_min_concentration``)
     is still, as nothing sees through where it stood; a person walking slowly across the
-    laser's view, whose returns fit the chair grid, leaves cells the next scans see through;
+    laser's view, whose returns fit the chair grid (a chair to the paper's test, a person to
+    ``person_min_vacated``), leaves cells the next scans see through;
     one walking straight at the laser hides their trail, and is not still because its cells
     are not hit again (``still_vacated_min_concentration``)."""
     cfg = CFG.model_copy(update={"still_max_vacated": 0.2})
@@ -386,9 +387,10 @@ def test_a_walkers_trail_is_seen_through_and_a_desk_seen_in_parts_is_not():
     across = [(person(3.5 + 0.05 * k, 3.5), (5.0, 1.0, np.pi / 2), (2.5, 3.0, 7.5, 4.0))
               for k in range(20)]
     w = _track_of(across, cfg)
-    assert w.vacated() > 0.3 and w.dominant() == "person" and not w.still_though_moving()
-    w.cfg = CFG
+    assert w.vacated() > 0.3 and not w.still_though_moving()
     assert w.ll_chair > w.ll_person and w.dominant() == "chair"
+    w.cfg = CFG.model_copy(update={"person_min_vacated": 0.2})  # beyond the paper, off
+    assert w.dominant() == "person"
     # at 0.5 m/s its returns fit the chair grid better than the person filter
     towards = [(person(5.0, 4.5 - 0.05 * k), (5.0, 1.0, np.pi / 2), (4.5, 1.5, 5.5, 5.0))
                for k in range(30)]
@@ -1012,10 +1014,11 @@ def test_a_person_walking_through_the_room_never_becomes_a_map_object(still_max_
     along with a true pose: GATMO tracks them as a person (counted when the track expires)
     and, at the end of the run, adds nothing of them to the map, marks nothing absent and
     relocates nothing; a box standing still in the same run is added (so the run could add
-    objects). The same with the person test of what later scans saw through
-    (``still_max_vacated``)."""
+    objects). The same with the tests of what later scans saw through
+    (``still_max_vacated``, ``person_min_vacated``)."""
     grid = room_grid(10, 6, 0.05)
-    cfg = CFG.model_copy(update={"still_max_vacated": still_max_vacated})
+    cfg = CFG.model_copy(update={"still_max_vacated": still_max_vacated,
+                                 "person_min_vacated": still_max_vacated})
     m = GatmoMapper.from_config(cfg, grid)
     m.begin_run(1)
     events = []
