@@ -215,9 +215,10 @@ class GatmoConfig(GatmoModel):
         None, ge=0, le=1, description="beyond the paper: with a value, a track of "
         "chair_min_scans scans or more with more than this share of its evidence on cells "
         "later scans saw through (Metaobject.vacated) is a person, however well its returns "
-        "fit its chair grid (people walking slowly). Off: at 0.2 on hall seeds 400-419 twin "
-        "swaps +0.35 per seed and noticed gone -4 points (docs/experiments.md, seventy-fourth "
-        "session)")
+        "fit its chair grid (people walking slowly). Off: at 0.2 on hall seeds 400-419, twin "
+        "swaps +0.35 per seed and noticed gone -1.4 points (with still_max_vacated 0.2) or -4 "
+        "(nearly alone, one seed lost): the stack's pose error sees real chairs through too "
+        "(docs/experiments.md, seventy-fourth session)")
     still_vacated_min_concentration: float = Field(
         0.6, ge=0, le=1, description="with still_max_vacated: the concentration "
         "(Metaobject.concentration) a track called a person for its motion needs to be still: "
