@@ -210,7 +210,9 @@ class GatmoConfig(GatmoModel):
         "lies on cells later scans saw through (Metaobject.vacated) and its concentration "
         "reaches still_vacated_min_concentration, instead of still_min_concentration. At the "
         "true poses of tuning halls 300-308 (36 runs): tracks on pieces 0.03 at most (165), "
-        "off them 0.26 or more but 4 of 119. None: the concentration alone")
+        "off them 0.26 or more but 4 of 119. None (the concentration alone): at 0.2 the soak "
+        "had one chain of four better and one worse, as with still_min_concentration 0.75, and "
+        "halls 400-419 two seeds changed (docs/experiments.md, seventy-fourth session)")
     person_min_vacated: float | None = Field(
         None, ge=0, le=1, description="beyond the paper: with a value, a track of "
         "chair_min_scans scans or more with more than this share of its evidence on cells "
