@@ -348,10 +348,8 @@ def _track_of(frames, cfg, fov_rad=np.pi, max_range_m=4.0, noise_m=0.0) -> Metao
     for k, (world, pose, (x0, y0, x1, y1)) in enumerate(frames):
         s = make_scan(world, pose, fov_rad=fov_rad, max_range_m=max_range_m, stamp_s=0.1 * k,
                       noise_m=noise_m, rng=np.random.default_rng(k))
-        a = pose[2] + s.angles_rad
-        pts = np.asarray(pose[:2]) + s.ranges_m[:, None] * np.stack([np.cos(a), np.sin(a)], 1)
-        pts = pts[(s.ranges_m < max_range_m) & (pts[:, 0] >= x0) & (pts[:, 0] <= x1)
-                  & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)]
+        pts = transform_points(np.asarray(pose, float), s.points_base_xy())
+        pts = pts[(pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)]
         if m is None:
             m = Metaobject(1, pts, 0.1 * k, cfg, 0.05)
         else:
