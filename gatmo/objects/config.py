@@ -369,6 +369,17 @@ class GatmoConfig(GatmoModel):
         "filter; it stays in the object map, tested for absence as before, and goes back into "
         "the localizer's map on the scan that sees it standing. None: every placed object is "
         "in the localizer's map")
+    end_run_take_unseen_runs: int | None = Field(
+        None, ge=1, description="beyond the paper: a chair about to join the map at a run's "
+        "end as a new object is instead the movable object that fits it best (match score, "
+        "free space, extent) among those not seen standing at their place in this many runs, "
+        "this one included; that object is relocated onto it and keeps its id. None: every "
+        "such chair is a new object, and the unseen piece stays where it stood. At 2, soak "
+        "chain 11 kept 5 stale objects after run 50 instead of 16 but made 10 false "
+        "relocations in 50 runs instead of 4 (found 3 instead of 2); chain 14: 16 instead of "
+        "21, false relocations 7 instead of 5; halls 400-419 false relocations +0.15 per seed "
+        "(docs/experiments.md, seventy-fifth session): most pieces it would take are "
+        "look-alikes, or pieces the map never had")
     withhold_agreement: bool = Field(
         True, description="with withhold_unseen_runs: the beams the map expects to end on a "
         "withheld object are left out of the test of a scan's pose (min_agreement), as they "

@@ -162,7 +162,8 @@ class GatmoMapper:
                        "gamma": 0, "persons": 0, "updates": 0, "skipped_poor_fit": 0,
                        "skipped_disagreement": 0, "unexplained_sparse": 0, "absence_vetoed": 0,
                        "gamma_unverified": 0, "gamma_gone": 0, "nudged": 0, "ambiguous": 0,
-                       "seen_through_scans": 0, "gamma_flicker": 0, "shifted_not_gone": 0}
+                       "seen_through_scans": 0, "gamma_flicker": 0, "shifted_not_gone": 0,
+                       "taken_unseen": 0}
         self._ms: list[float] = []
         self._beams = None
         self._sparse_agrees = False  # the last pose test: too few beams, those agreeing
@@ -410,13 +411,39 @@ class GatmoMapper:
             if np.mean(self.base.cells[cy, cx] == FREE) < self.cfg.add_min_free_fraction:
                 continue
             taken[cy, cx] = True
-            self._add(o, self._last_stamp, events)
+            if not self._take_unseen(o, events):
+                self._add(o, self._last_stamp, events)
         for o in self.object_map.placed():
             seen = self._confirmed(o) or self._placed_this_run(o)
             o.unseen_runs = 0 if seen else o.unseen_runs + 1
         self._withheld = self._unseen_ids()  # for the next run's localizer
         self._rerender()
         return events
+
+    def _take_unseen(self, g: MapObject, events) -> bool:
+        """With ``end_run_take_unseen_runs``: the Gamma object ``g``, about to be added at the
+        run's end, is instead where the best-fitting movable object unseen at its place for
+        that many runs (this one included) went: that object is relocated onto it (keeping its
+        id) and ``g`` leaves Gamma. Beyond the paper (which matches chairs with M during the
+        run): a piece moved while the robot looked elsewhere would otherwise stay in the map
+        where it stood and come back as a new object."""
+        n = self.cfg.end_run_take_unseen_runs
+        if n is None:
+            return False
+        best = None
+        for o in self.object_map.objects:
+            if (o.structure or o.status != "M" or o.unseen_runs + 1 < n
+                    or self._confirmed(o) or self._placed_this_run(o)):
+                continue
+            fit = self._fit_gamma_ranked(g, o)
+            if fit is not None and (best is None or fit[0] > best[0]):
+                best = (fit[0], o, fit[1])
+        if best is None:
+            return False
+        self.object_map.objects.remove(g)
+        self._relocate(best[1], best[2], self._last_stamp, events)
+        self.counts["taken_unseen"] += 1
+        return True
 
     def _add(self, o: MapObject, stamp_s, events) -> None:
         """A Gamma object ``o`` joins the map as a new object (in M)."""

@@ -732,6 +732,33 @@ def test_a_movable_object_not_seen_this_run_is_not_taken_by_a_look_alike(unseen_
     assert (("relocated", box.id) in kinds) == relocated
 
 
+@pytest.mark.parametrize("take_runs, unseen_before, taken", [
+    (None, 1, False),  # off: the box in front is a new object, the one behind stays
+    (2, 1, True),  # unseen in the last run and this one: it went to the box in front
+    (2, 0, False),  # seen standing in the last run: not yet
+])
+def test_a_new_object_at_the_run_end_is_a_long_unseen_look_alike(take_runs, unseen_before,
+                                                                 taken):
+    # the movable box behind the robot has not been seen standing for some runs, and an
+    # identical box the map lacks stands in front: with end_run_take_unseen_runs, at the run's
+    # end the box behind is relocated onto it (its id kept) instead of a new object added
+    m, box, world = _one_object((10, 6), (1.0, 2.5, 1.5, 3.0), [(6.0, 2.5, 6.5, 3.0)],
+                                end_run_take_unseen_runs=take_runs)
+    box.status = "M"
+    box.unseen_runs = unseen_before
+    path = [(4.0, y, 0.0) for y in np.linspace(2.2, 3.3, 45)]
+    events = _drive(m, world, path, max_range_m=6.0, n_beams=181)
+    assert [e.kind for e in events if e.kind in ("relocated", "added")] == []
+    kinds = [(e.kind, e.object_id) for e in m.end_run()]
+    assert (("relocated", box.id) in kinds) == taken
+    assert len([k for k, _ in kinds if k == "added"]) == (0 if taken else 1)
+    placed = [o for o in m.object_map.placed() if not o.structure]
+    assert len(placed) == (1 if taken else 2)
+    if taken:
+        np.testing.assert_allclose(box.pose_xytheta[:2], [6.25, 2.75], atol=0.06)
+        assert box.unseen_runs == 0 and box.history[-1]["run"] == 1
+
+
 @pytest.mark.parametrize("verified_only, absent", [(True, False), (False, True)])
 def test_rays_from_unconfirmed_poses_do_not_make_objects_absent(verified_only, absent):
     # the box is gone, but no pose of this drive was confirmed by the scan-to-map alignment
