@@ -263,6 +263,10 @@ class GatmoMapper:
                 if o.id in self._withheld and o.status in ("U", "M")
                 and not self._placed_this_run(o)]
 
+    def _seen_this_run(self, o: MapObject) -> bool:
+        """``o`` was seen standing at its place this run, or placed by evidence in it."""
+        return self._confirmed(o) or self._placed_this_run(o)
+
     def _placed_this_run(self, o: MapObject) -> bool:
         """``o`` was placed by evidence this run (a match or an add: its history grew)."""
         return len(o.history) > self._hist0.get(o.id, 0)
@@ -414,8 +418,7 @@ class GatmoMapper:
             if not self._take_unseen(o, events):
                 self._add(o, self._last_stamp, events)
         for o in self.object_map.placed():
-            seen = self._confirmed(o) or self._placed_this_run(o)
-            o.unseen_runs = 0 if seen else o.unseen_runs + 1
+            o.unseen_runs = 0 if self._seen_this_run(o) else o.unseen_runs + 1
         self._withheld = self._unseen_ids()  # for the next run's localizer
         self._rerender()
         return events
@@ -430,18 +433,15 @@ class GatmoMapper:
         n = self.cfg.end_run_take_unseen_runs
         if n is None:
             return False
-        best = None
-        for o in self.object_map.objects:
-            if (o.structure or o.status != "M" or o.unseen_runs + 1 < n
-                    or self._confirmed(o) or self._placed_this_run(o)):
-                continue
-            fit = self._fit_gamma_ranked(g, o)
-            if fit is not None and (best is None or fit[0] > best[0]):
-                best = (fit[0], o, fit[1])
-        if best is None:
+        fits = [(fit[0], k, o, fit[1]) for k, o in enumerate(self.object_map.objects)
+                if not o.structure and o.status == "M" and o.unseen_runs + 1 >= n
+                and not self._seen_this_run(o)
+                and (fit := self._fit_gamma_ranked(g, o)) is not None]
+        if not fits:
             return False
+        _, _, o, mt = max(fits, key=lambda f: (f[0], -f[1]))  # ties: the first, as before
         self.object_map.objects.remove(g)
-        self._relocate(best[1], best[2], self._last_stamp, events)
+        self._relocate(o, mt, self._last_stamp, events)
         self.counts["taken_unseen"] += 1
         return True
 
